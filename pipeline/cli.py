@@ -1,0 +1,152 @@
+"""The ``topomatch`` command line.
+
+Subcommands: ``run`` (run an experiment config), ``validate`` (check a config
+without running it), ``stages`` (list the stages and reports with their
+parameters). Errors print one short message naming the file and the problem
+and exit non-zero (2 for a bad config or usage, 1 for bad input data or failed
+items); ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from pipeline import __version__
+from pipeline.errors import RunError, TopomatchError
+from pipeline.paths import DATA_ROOT_ENV, data_root
+
+
+def _add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("config", help="experiment config (YAML)")
+    p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a config value: stage.param=value (noise.sigma=0.01) or a config key "
+                        "(executor.kind=dask); repeatable")
+    p.add_argument("--data-root", metavar="DIR", help=f"external data root for {{data_root}} paths "
+                                                       f"(default: ${DATA_ROOT_ENV})")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="topomatch",
+        description="Topological shape skeletons, shape matching and retrieval, and entropic image "
+                    "registration, run as reproducible YAML experiments.",
+    )
+    parser.add_argument("--version", action="version", version=f"topomatch {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    p = sub.add_parser("run", help="run an experiment config", description="Run an experiment config and "
+                       "write its run folder (config, manifest, tables, figures, index.html).")
+    _add_config_args(p)
+    p.add_argument("--out", metavar="DIR", default="runs", help="parent folder of run folders (default: runs)")
+    p.add_argument("--cache-dir", metavar="DIR", help="stage cache (default: OUT/.cache)")
+    p.add_argument("--no-cache", action="store_true", help="recompute everything, store nothing")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.set_defaults(handler=cmd_run)
+
+    p = sub.add_parser("validate", help="check a config without running it",
+                       description="Validate a config: structure, stage names, parameters, sweeps, "
+                                   "reports, and that the input files exist.")
+    _add_config_args(p)
+    p.set_defaults(handler=cmd_validate)
+
+    p = sub.add_parser("stages", help="list stages and reports with their parameters",
+                       description="List every registered stage and report with parameters and defaults.")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=cmd_stages)
+    return parser
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from pipeline.config import load_experiment
+    from pipeline.runner import run_experiment
+
+    experiment = load_experiment(args.config, overrides=args.overrides, data_root=data_root(args.data_root))
+    n = len(experiment.items())
+    print(f"{experiment.name}: {len(experiment.inputs)} inputs x {len(experiment.sweep_points())} sweep points "
+          f"= {n} items, {len(experiment.calls)} stages", file=sys.stderr)
+    outcome = run_experiment(
+        experiment, out_root=args.out, cache_dir=args.cache_dir, use_cache=not args.no_cache,
+        progress=not args.no_progress,
+    )
+    m = outcome.manifest
+    print(f"wrote {outcome.run_dir}/index.html  ({m['seconds']['compute']:.1f} s, "
+          f"cache hits {m['cache']['hits']}/{m['cache']['stage_results']})")
+    for label, paths in m["outputs"].items():
+        for p in paths:
+            print(f"  {label}: {p}")
+    if outcome.failed:
+        lines = "\n".join(f"  {r.error}" for r in outcome.failed)
+        raise RunError(f"{len(outcome.failed)} of {n} items failed (the others were written):\n{lines}")
+    errors = [p for paths in m["outputs"].values() for p in paths if p.startswith("ERROR: ")]
+    if errors:
+        raise RunError("\n".join(e[7:] for e in errors))
+    return 0
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    from pipeline.config import load_experiment
+
+    experiment = load_experiment(args.config, overrides=args.overrides, data_root=data_root(args.data_root))
+    print(f"{args.config}: ok ({experiment.name}: {len(experiment.inputs)} inputs, "
+          f"{len(experiment.sweep_points())} sweep points, {len(experiment.calls)} stages, "
+          f"{len(experiment.reports)} reports)")
+    return 0
+
+
+def cmd_stages(args: argparse.Namespace) -> int:
+    from pipeline.registry import describe_params, discover
+    from pipeline.reports import REPORTS
+
+    stages = discover()
+    listing = {
+        "stages": {
+            name: {"version": s.version, "consumes": list(s.consumes), "produces": list(s.produces), "doc": s.doc,
+                   "params": [dict(zip(("name", "type", "default", "description"), row))
+                              for row in describe_params(s.params)]}
+            for name, s in sorted(stages.items())
+        },
+        "reports": {
+            name: {"doc": r.doc, "params": [dict(zip(("name", "type", "default", "description"), row))
+                                            for row in describe_params(r.params)]}
+            for name, r in sorted(REPORTS.items())
+        },
+    }
+    if args.json:
+        print(json.dumps(listing, indent=2, default=str))
+        return 0
+    for kind in ("stages", "reports"):
+        print(f"{kind.upper()}")
+        for name, info in listing[kind].items():
+            flow = ""
+            if kind == "stages":
+                flow = f"  (v{info['version']}; {', '.join(info['consumes'])} -> {', '.join(info['produces']) or '-'})"
+            print(f"  {name}{flow}\n      {info['doc']}")
+            for p in info["params"]:
+                default = "required" if str(p["default"]) == "PydanticUndefined" else f"default {p['default']!r}"
+                desc = f"  {p['description']}" if p["description"] else ""
+                print(f"      {p['name']}: {p['type']} = {default}{desc}")
+        print()
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.handler(args)
+    except TopomatchError as exc:
+        if args.debug:
+            raise
+        print(f"topomatch: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("topomatch: interrupted; finished stages are cached, run again to resume", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,358 @@
+"""Experiment configs: YAML -> a validated :class:`Experiment`.
+
+A config names its inputs, the stage chain with parameters, optional sweeps,
+the reports it writes and the executor::
+
+    name: demo
+    inputs: {meshes: ["{bundled}/meshes/torus.off"]}
+    sweep: {noise.sigma: [0.0, 0.01]}        # grid over stage parameters
+    stages:
+      - load
+      - clean: {components: largest}
+      - noise: {sigma: 0.0, relative_to: bbox_diagonal, seed: 7}
+      - measures
+    reports:
+      - mesh_gallery: {}
+    executor: {kind: local}                  # or {kind: dask, address: ...}
+
+YAML is read with the safe loader; unknown keys, wrong types and unknown stage
+names are rejected with the config path of the problem
+(``stages[2].noise.sigma: Input should be a valid number, got 'x'``).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import itertools
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from pipeline.errors import ConfigError, InputError
+from pipeline.params import Params, validate_json_strict
+from pipeline.paths import resolve_input
+from pipeline.registry import StageSpec, get_stage
+
+#: State entries that the inputs provide before the first stage.
+INPUT_STATE = {"meshes": ("path",)}
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class ExecutorConfig(_Strict):
+    """Where the items of a run are computed."""
+
+    kind: Literal["local", "dask"] = Field("local", description="local process pool or a dask cluster")
+    workers: int | None = Field(None, ge=1, description="worker processes (default: all cores)")
+    address: str | None = Field(None, description="dask scheduler address; none starts a local cluster")
+
+
+class InputsConfig(_Strict):
+    """Input files, as path templates ({bundled}, {data_root}, globs)."""
+
+    meshes: list[str] = Field(default_factory=list)
+
+
+class RawConfig(_Strict):
+    """The structure of a config file, before stage names and params are resolved."""
+
+    name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+    description: str = ""
+    inputs: InputsConfig = InputsConfig()
+    sweep: dict[str, list[Any]] = Field(default_factory=dict)
+    stages: list[str | dict[str, dict[str, Any] | None]] = Field(min_length=1)
+    reports: list[str | dict[str, dict[str, Any] | None]] = Field(default_factory=list)
+    executor: ExecutorConfig = ExecutorConfig()
+
+    @field_validator("sweep")
+    @classmethod
+    def _non_empty_sweeps(cls, value: dict[str, list[Any]]) -> dict[str, list[Any]]:
+        for key, values in value.items():
+            if not values:
+                raise ValueError(f"sweep {key!r} has no values")
+        return value
+
+
+@dataclass(frozen=True)
+class StageCall:
+    """One entry of the stage chain, with validated params."""
+
+    index: int
+    label: str  # unique within the chain: the name, or name#k for repeats
+    spec: StageSpec
+    params: Params
+
+    @property
+    def where(self) -> str:
+        return f"stages[{self.index}].{self.spec.name}"
+
+
+@dataclass(frozen=True)
+class ReportCall:
+    index: int
+    name: str
+    params: Params
+
+
+@dataclass(frozen=True)
+class Item:
+    """One unit of work: one input file at one sweep point."""
+
+    item_id: str
+    input_path: str
+    sweep: dict[str, Any]
+    calls: tuple[StageCall, ...]
+
+
+@dataclass
+class Experiment:
+    """A validated config, ready to run."""
+
+    raw: RawConfig
+    source: Path | None
+    calls: tuple[StageCall, ...]
+    reports: tuple[ReportCall, ...]
+    inputs: list[Path] = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return self.raw.name
+
+    def sweep_points(self) -> list[dict[str, Any]]:
+        """Cartesian product of the sweep values, in config order."""
+        keys = list(self.raw.sweep)
+        return [dict(zip(keys, combo)) for combo in itertools.product(*(self.raw.sweep[k] for k in keys))]
+
+    def items(self) -> list[Item]:
+        """Every (input, sweep point) pair with its resolved stage calls."""
+        out = []
+        for path in self.inputs:
+            for point in self.sweep_points():
+                calls = tuple(_with_overrides(self.calls, point))
+                suffix = ",".join(f"{k}={v}" for k, v in point.items())
+                item_id = path.name + (f"[{suffix}]" if suffix else "")
+                out.append(Item(item_id, str(path), point, calls))
+        return out
+
+    def resolved(self) -> dict[str, Any]:
+        """The config with every default filled in (written to the run folder)."""
+        return {
+            "name": self.raw.name,
+            "description": self.raw.description,
+            "inputs": {"meshes": [str(p) for p in self.inputs]},
+            "sweep": self.raw.sweep,
+            "stages": [{c.spec.name: c.params.canonical()} for c in self.calls],
+            "stage_versions": {c.spec.name: c.spec.version for c in self.calls},
+            "reports": [{r.name: r.params.canonical()} for r in self.reports],
+            "executor": self.raw.executor.model_dump(mode="json"),
+        }
+
+    def content_hash(self) -> str:
+        """Hash of what determines the results (not the executor), 12 hex digits."""
+        payload = {k: v for k, v in self.resolved().items() if k != "executor"}
+        return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()[:12]
+
+
+def read_yaml(path: str | Path) -> dict[str, Any]:
+    """Safe-load a YAML mapping; errors name the file."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "config file not found")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot read config ({exc})") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: a config must be a YAML mapping, got {type(data).__name__}")
+    return data
+
+
+def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Apply CLI ``--set key=value`` overrides to raw config data.
+
+    ``key`` is either a dotted path into the config (``executor.kind``,
+    ``name``) or ``stage.param`` for a stage of the chain (``noise.sigma``).
+    Values are parsed as YAML scalars (``0.01``, ``true``, ``[1, 2]``).
+    """
+    data = copy.deepcopy(data)
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"--set {item!r}: expected key=value")
+        key, text = item.split("=", 1)
+        try:
+            value = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"--set {item!r}: value is not valid YAML ({exc})") from None
+        parts = key.strip().split(".")
+        if parts[0] in RawConfig.model_fields:
+            target = data
+            for part in parts[:-1]:
+                target = target.setdefault(part, {})
+                if not isinstance(target, dict):
+                    raise ConfigError(f"--set {key}: {part!r} is not a mapping")
+            target[parts[-1]] = value
+            continue
+        if len(parts) != 2:
+            raise ConfigError(f"--set {key}: expected a config key or stage.param")
+        entries = data.get("stages") or []
+        positions = [i for i, e in enumerate(entries) if _entry_name(e) == parts[0]]
+        if len(positions) != 1:
+            raise ConfigError(f"--set {key}: the chain has {len(positions)} stages called {parts[0]!r}, expected exactly one")
+        i = positions[0]
+        entry = entries[i]
+        params = dict(entry[parts[0]] or {}) if isinstance(entry, dict) else {}
+        params[parts[1]] = value
+        entries[i] = {parts[0]: params}
+    return data
+
+
+def _entry_name(entry: Any) -> str | None:
+    if isinstance(entry, str):
+        return entry
+    if isinstance(entry, dict) and len(entry) == 1:
+        return next(iter(entry))
+    return None
+
+
+def _split_entry(entry: Any, where: str) -> tuple[str, dict[str, Any]]:
+    name = _entry_name(entry)
+    if name is None:
+        raise ConfigError(f"{where}: expected a stage name or a mapping {{name: {{params}}}} with one key, got {entry!r}")
+    params = entry[name] if isinstance(entry, dict) else None
+    return name, dict(params or {})
+
+
+def build_experiment(
+    data: dict[str, Any],
+    *,
+    source: Path | None = None,
+    data_root: Path | None = None,
+    resolve_inputs: bool = True,
+) -> Experiment:
+    """Validate raw config data into an :class:`Experiment`.
+
+    Checks the structure, every stage name and parameter set, that each stage's
+    inputs are produced earlier in the chain, every sweep key and value, every
+    report, and (``resolve_inputs``) that the input files exist.
+    """
+    prefix = f"{source}: " if source else ""
+    try:
+        raw = validate_json_strict(RawConfig, data, "")
+        calls = _resolve_calls(raw)
+        _check_data_flow(raw, calls)
+        _check_sweeps(raw, calls)
+        reports = _resolve_reports(raw)
+    except ConfigError as exc:
+        raise ConfigError(prefix + str(exc).replace("\n", "\n" + " " * len(prefix))) from None
+    experiment = Experiment(raw=raw, source=source, calls=calls, reports=reports)
+    if resolve_inputs:
+        base = source.parent if source else Path.cwd()
+        paths: list[Path] = []
+        for i, template in enumerate(raw.inputs.meshes):
+            try:
+                paths.extend(resolve_input(template, base_dir=base, root=data_root, where=f"inputs.meshes[{i}]"))
+            except ConfigError as exc:
+                raise ConfigError(prefix + str(exc)) from None
+        experiment.inputs = paths
+    return experiment
+
+
+def load_experiment(
+    path: str | Path,
+    *,
+    overrides: list[str] = (),
+    data_root: Path | None = None,
+    resolve_inputs: bool = True,
+) -> Experiment:
+    """Read, override and validate the config file at ``path``."""
+    path = Path(path)
+    data = apply_overrides(read_yaml(path), list(overrides))
+    return build_experiment(data, source=path, data_root=data_root, resolve_inputs=resolve_inputs)
+
+
+def _resolve_calls(raw: RawConfig) -> tuple[StageCall, ...]:
+    calls, seen = [], {}
+    for i, entry in enumerate(raw.stages):
+        name, params = _split_entry(entry, f"stages[{i}]")
+        try:
+            spec = get_stage(name)
+        except ConfigError as exc:
+            raise ConfigError(f"stages[{i}]: {exc}") from None
+        seen[name] = seen.get(name, 0) + 1
+        label = name if seen[name] == 1 else f"{name}#{seen[name]}"
+        calls.append(StageCall(i, label, spec, spec.params.parse(params, f"stages[{i}].{name}")))
+    return tuple(calls)
+
+
+def _check_data_flow(raw: RawConfig, calls: tuple[StageCall, ...]) -> None:
+    available = set()
+    for kind, keys in INPUT_STATE.items():
+        if getattr(raw.inputs, kind):
+            available.update(keys)
+    for call in calls:
+        missing = [k for k in call.spec.consumes if k not in available]
+        if missing:
+            raise ConfigError(
+                f"{call.where}: needs {', '.join(repr(m) for m in missing)}, which neither the inputs "
+                f"nor an earlier stage provide (available: {', '.join(sorted(available)) or 'nothing'})"
+            )
+        available.update(call.spec.produces)
+
+
+def _sweep_target(key: str, calls: tuple[StageCall, ...]) -> tuple[int, str]:
+    if key.count(".") != 1:
+        raise ConfigError(f"sweep.{key}: expected 'stage.param'")
+    name, param = key.split(".")
+    matches = [i for i, c in enumerate(calls) if c.spec.name == name]
+    if len(matches) != 1:
+        raise ConfigError(f"sweep.{key}: the chain has {len(matches)} stages called {name!r}, expected exactly one")
+    call = calls[matches[0]]
+    if param not in call.spec.params.model_fields:
+        known = ", ".join(call.spec.params.model_fields) or "none"
+        raise ConfigError(f"sweep.{key}: stage {name!r} has no parameter {param!r} (parameters: {known})")
+    return matches[0], param
+
+
+def _with_overrides(calls: tuple[StageCall, ...], point: dict[str, Any]) -> list[StageCall]:
+    out = list(calls)
+    for key, value in point.items():
+        pos, param = _sweep_target(key, calls)
+        call = out[pos]
+        values = call.params.model_dump(mode="json") | {param: value}
+        out[pos] = StageCall(call.index, call.label, call.spec, call.spec.params.parse(values, f"sweep.{call.spec.name}"))
+    return out
+
+
+def _check_sweeps(raw: RawConfig, calls: tuple[StageCall, ...]) -> None:
+    for key, values in raw.sweep.items():
+        _sweep_target(key, calls)
+        for j, value in enumerate(values):
+            try:
+                _with_overrides(calls, {key: value})
+            except ConfigError as exc:
+                raise ConfigError(str(exc).replace(f"sweep.{key}", f"sweep.{key}[{j}]", 1)) from None
+
+
+def _resolve_reports(raw: RawConfig) -> tuple[ReportCall, ...]:
+    from pipeline.reports import get_report
+
+    out = []
+    for i, entry in enumerate(raw.reports):
+        name, params = _split_entry(entry, f"reports[{i}]")
+        try:
+            spec = get_report(name)
+        except ConfigError as exc:
+            raise ConfigError(f"reports[{i}]: {exc}") from None
+        out.append(ReportCall(i, name, spec.params.parse(params, f"reports[{i}].{name}")))
+    return tuple(out)

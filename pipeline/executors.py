@@ -1,0 +1,80 @@
+"""Executors: where the items of a run are computed.
+
+``local`` runs items in a process pool (``forkserver`` start method: no fork of a
+threaded parent) with one worker per core by default, or inline when there is
+one worker or one item. ``dask`` submits items to a dask.distributed cluster: a
+new ``LocalCluster`` (processes, one thread each) or an existing scheduler at
+``address``. Both yield results as they complete; the runner orders them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from typing import Iterator, Sequence
+
+from pipeline.config import ExecutorConfig, Item
+from pipeline.errors import ConfigError
+from pipeline.item import ItemResult, run_item
+
+
+def default_workers() -> int:
+    return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1)
+
+
+def execute(items: Sequence[Item], cache_root: str | None, config: ExecutorConfig) -> Iterator[ItemResult]:
+    """Run every item; yield results in completion order."""
+    if config.kind == "dask":
+        yield from _dask(items, cache_root, config)
+    else:
+        yield from _local(items, cache_root, config.workers or default_workers())
+
+
+def _local(items: Sequence[Item], cache_root: str | None, workers: int) -> Iterator[ItemResult]:
+    workers = min(workers, len(items))
+    if workers <= 1:
+        for item in items:
+            yield run_item(item, cache_root)
+        return
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(["pipeline.item"])
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        futures = [pool.submit(run_item, item, cache_root) for item in items]
+        try:
+            for future in as_completed(futures):
+                yield future.result()
+        except BaseException:
+            for f in futures:
+                f.cancel()
+            raise
+
+
+def _dask(items: Sequence[Item], cache_root: str | None, config: ExecutorConfig) -> Iterator[ItemResult]:
+    try:
+        from dask.distributed import Client, LocalCluster, as_completed as dask_completed
+    except ImportError as exc:  # pragma: no cover - dask is a dependency
+        raise ConfigError(f"executor.kind=dask needs dask[distributed] ({exc})") from None
+    cluster = None
+    if config.address:
+        try:
+            client = Client(config.address, timeout="10s")
+        except OSError as exc:
+            raise ConfigError(f"executor.address: cannot reach the dask scheduler at {config.address!r} ({exc})") from None
+    else:
+        cluster = LocalCluster(
+            n_workers=config.workers or default_workers(),
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+        )
+        client = Client(cluster)
+    try:
+        futures = [client.submit(run_item, item, cache_root, pure=False) for item in items]
+        for future in dask_completed(futures):
+            yield future.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+

@@ -1,0 +1,66 @@
+"""Where data lives: the bundled data folder and the external data root.
+
+Config inputs are path templates. ``{bundled}`` is the project's ``data/``
+folder (permissively licensed meshes and images, shipped in the repository);
+``{data_root}`` is the external data root, set with ``--data-root`` or the
+``TOPOMATCH_DATA_ROOT`` environment variable (CI points it at ``../shared/data``).
+Relative paths are relative to the config file's folder. Glob patterns
+(``*``, ``?``, ``[...]``) are expanded and sorted.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+from pathlib import Path
+
+from pipeline.errors import ConfigError, InputError
+
+DATA_ROOT_ENV = "TOPOMATCH_DATA_ROOT"
+
+#: The repository's bundled data folder.
+BUNDLED_DIR = Path(__file__).resolve().parents[1] / "data"
+
+
+def data_root(explicit: str | Path | None = None) -> Path | None:
+    """The external data root: ``explicit``, else ``$TOPOMATCH_DATA_ROOT``, else None."""
+    value = explicit if explicit is not None else os.environ.get(DATA_ROOT_ENV)
+    if not value:
+        return None
+    return Path(value).expanduser().resolve()
+
+
+def uses_data_root(template: str) -> bool:
+    return "{data_root}" in template
+
+
+def resolve_input(template: str, *, base_dir: Path, root: Path | None, where: str) -> list[Path]:
+    """Expand one input template into existing files.
+
+    Raises
+    ------
+    ConfigError
+        ``{data_root}`` is used but no data root is set, or the template is malformed.
+    InputError
+        No file matches (names the resolved path).
+    """
+    if uses_data_root(template) and root is None:
+        raise ConfigError(
+            f"{where}: {template!r} needs the external data root; pass --data-root DIR "
+            f"or set {DATA_ROOT_ENV} (e.g. to ../shared/data)"
+        )
+    try:
+        text = template.format(data_root=str(root) if root else "", bundled=str(BUNDLED_DIR))
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ConfigError(f"{where}: bad path template {template!r}: only {{data_root}} and {{bundled}} are known ({exc})") from None
+    path = Path(text).expanduser()
+    if not path.is_absolute():
+        path = base_dir / path
+    if glob.has_magic(str(path)):
+        matches = sorted(Path(p) for p in glob.glob(str(path)) if Path(p).is_file())
+        if not matches:
+            raise InputError(path, "no file matches this pattern")
+        return matches
+    if not path.exists():
+        raise InputError(path, "file not found")
+    return [path]

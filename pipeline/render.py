@@ -1,0 +1,49 @@
+"""Drawing triangle meshes with matplotlib (headless, no OpenGL needed)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stages.mesh.mesh import Mesh
+
+
+def face_shading(V: np.ndarray, F: np.ndarray, light: tuple[float, float, float] = (0.4, -0.5, 0.8)) -> np.ndarray:
+    """Lambert shading in [0.25, 1] per face, (m,) float, from a directional light."""
+    n = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    l = np.asarray(light, dtype=float)
+    l /= np.linalg.norm(l)
+    return 0.25 + 0.75 * np.abs(n @ l)
+
+
+def z_up(mesh: Mesh, up: str) -> Mesh:
+    """A copy of ``mesh`` rotated so that its ``up`` axis ('x', 'y' or 'z') points along +z (for display)."""
+    order = {"x": [1, 2, 0], "y": [2, 0, 1], "z": [0, 1, 2]}[up]
+    return Mesh(mesh.V[:, order], mesh.F, mesh.name)
+
+
+def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "viridis",
+              color=(0.75, 0.78, 0.85), elev: float = 20.0, azim: float = -60.0) -> None:
+    """Draw ``mesh`` on a 3D axis, shaded; ``values`` (n,) colours it by a vertex function."""
+    from matplotlib import colormaps
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    V, F = mesh.V, mesh.F
+    shade = face_shading(V, F)[:, None]
+    if values is not None:
+        v = np.asarray(values, dtype=float)[F].mean(axis=1)
+        span = np.ptp(v) or 1.0
+        base = colormaps[cmap]((v - v.min()) / span)[:, :3]
+    else:
+        base = np.broadcast_to(np.asarray(color, dtype=float), (len(F), 3))
+    rgb = np.clip(base * shade, 0, 1)
+    poly = Poly3DCollection(V[F], facecolors=rgb, edgecolors="none", linewidths=0)
+    ax.add_collection3d(poly)
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    mid, half = (lo + hi) / 2, (hi - lo).max() / 2 or 1.0
+    ax.set_xlim(mid[0] - half, mid[0] + half)
+    ax.set_ylim(mid[1] - half, mid[1] + half)
+    ax.set_zlim(mid[2] - half, mid[2] + half)
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=elev, azim=azim)
+    ax.set_axis_off()

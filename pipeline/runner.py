@@ -1,0 +1,102 @@
+"""Running an experiment: items -> executor -> cached stage results -> run folder.
+
+A run writes ``<out>/<config name>-<content hash>/``::
+
+    config.yaml      the resolved config (all defaults filled in)
+    manifest.json    versions, seeds, timings, cache hits, errors per item
+    tables/          results.csv/.json (one row per item) and report tables
+    figures/         PNG figures of the reports
+    index.html       a page that shows all of it
+
+Stage results are cached by content hash (see :mod:`pipeline.cache`), so an
+interrupted run resumes where it stopped and a changed parameter recomputes
+only the stages downstream of it.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import yaml
+from tqdm import tqdm
+
+from pipeline.cache import atomic_write_text
+from pipeline.config import Experiment
+from pipeline.executors import execute
+from pipeline.item import ItemResult
+from pipeline.manifest import build_manifest
+from pipeline.reports import write_report_outputs, write_index_html, write_table, run_reports
+
+DEFAULT_OUT = Path("runs")
+CACHE_DIRNAME = ".cache"
+
+
+@dataclass
+class RunOutcome:
+    """Where a run wrote its results, and what each item produced."""
+
+    run_dir: Path
+    items: list[ItemResult]
+    manifest: dict[str, Any]
+
+    @property
+    def failed(self) -> list[ItemResult]:
+        return [r for r in self.items if not r.ok]
+
+
+def run_experiment(
+    experiment: Experiment,
+    *,
+    out_root: str | Path = DEFAULT_OUT,
+    cache_dir: str | Path | None = None,
+    use_cache: bool = True,
+    progress: bool = True,
+) -> RunOutcome:
+    """Run every item of ``experiment`` and write its run folder.
+
+    Parameters
+    ----------
+    out_root : path
+        Parent of the run folder.
+    cache_dir : path, optional
+        Stage cache; default ``<out_root>/.cache``.
+    use_cache : bool
+        False computes everything and stores nothing.
+    progress : bool
+        Show a progress bar on stderr.
+    """
+    out_root = Path(out_root)
+    run_dir = out_root / f"{experiment.name}-{experiment.content_hash()}"
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cache_root = None
+    if use_cache:
+        cache_root = str(Path(cache_dir) if cache_dir is not None else out_root / CACHE_DIRNAME)
+    atomic_write_text(run_dir / "config.yaml", yaml.safe_dump(experiment.resolved(), sort_keys=False))
+
+    items = experiment.items()
+    started = datetime.now(timezone.utc)
+    t0 = time.perf_counter()
+    by_id: dict[str, ItemResult] = {}
+    with tqdm(total=len(items), desc=experiment.name, unit="item", disable=not progress, leave=False) as bar:
+        for result in execute(items, cache_root, experiment.raw.executor):
+            by_id[result.item_id] = result
+            bar.set_postfix_str(result.item_id[-40:])
+            bar.update()
+    results = [by_id[item.item_id] for item in items]
+    compute_seconds = time.perf_counter() - t0
+
+    write_table(run_dir / "tables", "results", [r.row() for r in results])
+    outputs = run_reports(experiment, results)
+    written = write_report_outputs(run_dir, outputs)
+    manifest = build_manifest(
+        experiment, results, started=started, compute_seconds=compute_seconds,
+        total_seconds=time.perf_counter() - t0, cache_root=cache_root, outputs=written,
+    )
+    atomic_write_text(run_dir / "manifest.json", json.dumps(manifest, indent=2, default=str))
+    write_index_html(run_dir, experiment, results, manifest, written)
+    return RunOutcome(run_dir, results, manifest)

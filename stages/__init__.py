@@ -1,0 +1,1 @@
+"""The science of topomatch, one concept per module, grouped by domain."""

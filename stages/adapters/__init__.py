@@ -1,0 +1,1 @@
+"""One module per external library, converting canonical data in and out."""

@@ -1,0 +1,1 @@
+"""Cross-checks of stages against pymeshlab, open3d and libigl."""

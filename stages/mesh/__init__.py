@@ -1,0 +1,1 @@
+"""Mesh stages: io, clean/validate, decimate, noise, transform, measures."""

@@ -1,0 +1,193 @@
+"""Reading triangle meshes: OFF, OBJ, PLY, STL and the gzip of each.
+
+libigl's ``read_triangle_mesh`` is the reader; open3d is the fallback for the PLY
+and STL variants libigl cannot read. Gzipped files are decompressed to a
+temporary file with the inner suffix. Every failure becomes an
+:class:`~pipeline.errors.InputError` naming the file and the problem.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gzip
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Literal
+
+import numpy as np
+from pydantic import Field
+
+from pipeline.errors import InputError
+from pipeline.params import Params
+from pipeline.registry import stage
+from pipeline.result import StageResult
+from stages.mesh.mesh import Mesh
+
+SUPPORTED_SUFFIXES = (".off", ".obj", ".ply", ".stl")
+
+
+class LoadParams(Params):
+    """Parameters of :func:`load`."""
+
+    reader: Literal["auto", "igl", "open3d"] = Field("auto", description="mesh reader: libigl first then open3d (auto), or only one")
+
+
+@dataclass(frozen=True, eq=False)
+class LoadResult(StageResult):
+    """A mesh read from ``path``."""
+
+    mesh: Mesh
+    path: str
+    reader: str
+
+    def summary(self) -> dict:
+        return {"vertices": self.mesh.n_vertices, "faces": self.mesh.n_faces, "reader": self.reader}
+
+
+def mesh_format(path: str | Path) -> str:
+    """The mesh format of ``path`` ('.off', '.obj', ...), looking through a '.gz' suffix."""
+    suffixes = [s.lower() for s in Path(path).suffixes]
+    if suffixes and suffixes[-1] == ".gz":
+        suffixes = suffixes[:-1]
+    fmt = suffixes[-1] if suffixes else ""
+    if fmt not in SUPPORTED_SUFFIXES:
+        raise InputError(path, f"unsupported mesh format {fmt or '(no suffix)'!r}; expected one of "
+                               f"{', '.join(SUPPORTED_SUFFIXES)} (optionally gzipped)")
+    return fmt
+
+
+@contextlib.contextmanager
+def _plain_file(path: Path, fmt: str) -> Iterator[Path]:
+    """Yield a path to the uncompressed content of ``path``."""
+    if path.suffix.lower() != ".gz":
+        yield path
+        return
+    with tempfile.TemporaryDirectory(prefix="topomatch-") as tmp:
+        plain = Path(tmp) / f"mesh{fmt}"
+        try:
+            with gzip.open(path, "rb") as src, open(plain, "wb") as dst:
+                shutil.copyfileobj(src, dst)
+        except (OSError, EOFError) as exc:
+            raise InputError(path, f"cannot decompress gzip file ({exc})") from None
+        yield plain
+
+
+@contextlib.contextmanager
+def _captured_stderr() -> Iterator[list[str]]:
+    """Capture what C++ code writes to file descriptors 1 and 2 (libigl's parse messages)."""
+    lines: list[str] = []
+    with tempfile.TemporaryFile(mode="w+b") as buf:
+        saved = [os.dup(1), os.dup(2)]
+        try:
+            os.dup2(buf.fileno(), 1)
+            os.dup2(buf.fileno(), 2)
+            yield lines
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+            buf.seek(0)
+            lines.extend(buf.read().decode("utf-8", "replace").splitlines())
+
+
+def _read_igl(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
+    import igl
+
+    with _captured_stderr() as messages:
+        try:
+            V, F = igl.read_triangle_mesh(str(plain))
+            ok = True
+        except RuntimeError:
+            ok = False
+    if not ok:
+        detail = "; ".join(m.strip() for m in messages if m.strip()) or "libigl could not parse it"
+        raise ValueError(detail)
+    return V, F, "igl"
+
+
+def _read_open3d(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
+    import open3d as o3d
+
+    with _captured_stderr():
+        tm = o3d.io.read_triangle_mesh(str(plain))
+    V = np.asarray(tm.vertices, dtype=np.float64)
+    F = np.asarray(tm.triangles, dtype=np.int64)
+    if V.size == 0:
+        raise ValueError("open3d read no vertices")
+    return V, F, "open3d"
+
+
+def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
+    """Read a triangle mesh file.
+
+    Parameters
+    ----------
+    path : str or Path
+        An OFF, OBJ, PLY or STL file, optionally gzipped (``.off.gz``).
+    reader : {'auto', 'igl', 'open3d'}
+        'auto' tries libigl first and open3d second.
+
+    Returns
+    -------
+    mesh : Mesh
+        ``V`` (n, 3) float64 and ``F`` (m, 3) int64, named after the file stem.
+    reader : str
+        The reader that succeeded.
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, unknown format, parse failure, no faces,
+        non-finite coordinates or face indices out of range.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "file not found")
+    if not path.is_file():
+        raise InputError(path, "not a regular file")
+    if not os.access(path, os.R_OK):
+        raise InputError(path, "file is not readable (permission denied)")
+    fmt = mesh_format(path)
+    readers = {"igl": [_read_igl], "open3d": [_read_open3d], "auto": [_read_igl, _read_open3d]}[reader]
+    problems = []
+    with _plain_file(path, fmt) as plain:
+        if plain.stat().st_size == 0:
+            raise InputError(path, "file is empty")
+        for read in readers:
+            try:
+                V, F, used = read(plain)
+            except ValueError as exc:
+                problems.append(str(exc))
+                continue
+            if V.ndim == 2 and V.shape[0] > 0 and F.ndim == 2 and F.shape[0] > 0:
+                break
+            problems.append(f"{read.__name__.removeprefix('_read_')} found {len(V)} vertices and {len(F)} faces")
+        else:
+            raise InputError(path, f"malformed {fmt[1:].upper()} file: " + "; ".join(problems))
+    return _checked_mesh(path, V, F, used), used
+
+
+def _checked_mesh(path: Path, V: np.ndarray, F: np.ndarray, reader: str) -> Mesh:
+    if V.shape[1] != 3:
+        raise InputError(path, f"expected 3D vertices, got shape {V.shape}")
+    if F.shape[1] != 3:
+        raise InputError(path, f"expected triangles, got faces of shape {F.shape} (polygons are not supported)")
+    if not np.all(np.isfinite(V)):
+        raise InputError(path, f"{int((~np.isfinite(V)).any(axis=1).sum())} vertices have non-finite coordinates")
+    if F.min() < 0 or F.max() >= len(V):
+        raise InputError(path, f"face indices out of range [0, {len(V) - 1}] (min {F.min()}, max {F.max()})")
+    name = path.name
+    for suffix in (".gz",) + SUPPORTED_SUFFIXES:
+        name = name.removesuffix(suffix).removesuffix(suffix.upper())
+    return Mesh(V, F, name=name)
+
+
+@stage("load", params=LoadParams, version=1, consumes=("path",), produces=("mesh",))
+def load(path: str, *, params: LoadParams) -> LoadResult:
+    """Read a mesh file (OFF, OBJ, PLY, STL, optionally gzipped)."""
+    mesh, used = read_mesh(path, reader=params.reader)
+    return LoadResult(mesh=mesh, path=str(path), reader=used)
