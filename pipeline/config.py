@@ -35,7 +35,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from pipeline.errors import ConfigError, InputError
 from pipeline.params import Params, validate_json_strict
-from pipeline.paths import resolve_input
+from pipeline.paths import display_path, resolve_input
 from pipeline.registry import StageSpec, get_stage
 
 #: State entries that the inputs provide before the first stage.
@@ -109,6 +109,7 @@ class Item:
     input_path: str
     sweep: dict[str, Any]
     calls: tuple[StageCall, ...]
+    input_label: str = ""  # input_path as shown in tables ({bundled}/..., {data_root}/...)
 
 
 @dataclass
@@ -120,6 +121,7 @@ class Experiment:
     calls: tuple[StageCall, ...]
     reports: tuple[ReportCall, ...]
     inputs: list[Path] = field(default_factory=list)
+    data_root: Path | None = None
 
     @property
     def name(self) -> str:
@@ -133,12 +135,15 @@ class Experiment:
     def items(self) -> list[Item]:
         """Every (input, sweep point) pair with its resolved stage calls."""
         out = []
+        names = [p.name for p in self.inputs]
         for path in self.inputs:
+            label = display_path(path, self.data_root)
+            base = path.name if names.count(path.name) == 1 else label
             for point in self.sweep_points():
                 calls = tuple(_with_overrides(self.calls, point))
                 suffix = ",".join(f"{k}={v}" for k, v in point.items())
-                item_id = path.name + (f"[{suffix}]" if suffix else "")
-                out.append(Item(item_id, str(path), point, calls))
+                item_id = base + (f"[{suffix}]" if suffix else "")
+                out.append(Item(item_id, str(path), point, calls, label))
         return out
 
     def resolved(self) -> dict[str, Any]:
@@ -146,7 +151,7 @@ class Experiment:
         return {
             "name": self.raw.name,
             "description": self.raw.description,
-            "inputs": {"meshes": [str(p) for p in self.inputs]},
+            "inputs": {"meshes": [display_path(p, self.data_root) for p in self.inputs]},
             "sweep": self.raw.sweep,
             "stages": [{c.spec.name: c.params.canonical()} for c in self.calls],
             "stage_versions": {c.spec.name: c.spec.version for c in self.calls},
@@ -265,6 +270,7 @@ def build_experiment(
             except ConfigError as exc:
                 raise ConfigError(prefix + str(exc)) from None
         experiment.inputs = paths
+        experiment.data_root = data_root
     return experiment
 
 

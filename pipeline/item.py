@@ -20,6 +20,7 @@ class ItemResult:
     item_id: str
     input_path: str
     sweep: dict[str, Any]
+    input_label: str = ""
     results: dict[str, Any] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     cache_hits: dict[str, bool] = field(default_factory=dict)
@@ -43,7 +44,7 @@ class ItemResult:
 
     def row(self) -> dict[str, Any]:
         """Flat table row: item, input, sweep values, status, then ``label.column`` summaries."""
-        row: dict[str, Any] = {"item": self.item_id, "input": self.input_path}
+        row: dict[str, Any] = {"item": self.item_id, "input": self.input_label or self.input_path}
         row.update(self.sweep)
         row["status"] = "ok" if self.ok else "failed"
         row["error"] = self.error or ""
@@ -63,7 +64,7 @@ def run_item(item: Item, cache_root: str | None) -> ItemResult:
     """
     discover()
     cache = Cache(cache_root)
-    out = ItemResult(item.item_id, item.input_path, dict(item.sweep))
+    out = ItemResult(item.item_id, item.input_path, dict(item.sweep), item.input_label)
     state: dict[str, tuple[Any, str]] = {}
     try:
         state["path"] = (item.input_path, hash_file(item.input_path))

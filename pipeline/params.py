@@ -69,10 +69,10 @@ def format_validation_error(exc: ValidationError, where: str) -> str:
         loc = where
         for part in err["loc"]:
             loc += f"[{part}]" if isinstance(part, int) else (f".{part}" if loc else str(part))
-        msg = err["msg"]
+        msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "unknown key"
-        elif err["type"] != "missing":
+        elif err["type"] != "missing" and err["loc"]:
             msg += f", got {err.get('input')!r}"
         lines.append(f"{loc}: {msg}")
     return "\n".join(lines)

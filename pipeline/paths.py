@@ -64,3 +64,12 @@ def resolve_input(template: str, *, base_dir: Path, root: Path | None, where: st
     if not path.exists():
         raise InputError(path, "file not found")
     return [path]
+
+
+def display_path(path: str | Path, root: Path | None = None) -> str:
+    """``path`` written with the ``{bundled}`` / ``{data_root}`` prefix when it lies under one."""
+    path = Path(path).resolve()
+    for prefix, base in (("{bundled}", BUNDLED_DIR), ("{data_root}", root)):
+        if base is not None and path.is_relative_to(base):
+            return f"{prefix}/{path.relative_to(base).as_posix()}"
+    return str(path)

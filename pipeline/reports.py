@@ -198,6 +198,7 @@ class TableParams(Params):
     name: str = Field("summary", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the table")
     columns: list[str] = Field(default_factory=lambda: ["*"], description="glob patterns of results columns to keep")
     only_ok: bool = Field(False, description="leave failed items out")
+    unique: bool = Field(False, description="drop rows repeated after the column selection")
 
 
 def select_columns(rows: list[dict[str, Any]], patterns: list[str]) -> list[dict[str, Any]]:
@@ -216,8 +217,12 @@ def select_columns(rows: list[dict[str, Any]], patterns: list[str]) -> list[dict
 @report("table", params=TableParams)
 def table_report(experiment, results, params: TableParams) -> ReportOutput:
     """Selected columns of the results table."""
-    rows = [r.row() for r in results if r.ok or not params.only_ok]
-    return ReportOutput(tables={params.name: select_columns(rows, params.columns)})
+    rows = select_columns([r.row() for r in results if r.ok or not params.only_ok], params.columns)
+    if params.unique:
+        seen: set[str] = set()
+        rows = [r for r in rows if not (json.dumps(r, sort_keys=True, default=str) in seen
+                                        or seen.add(json.dumps(r, sort_keys=True, default=str)))]
+    return ReportOutput(tables={params.name: rows})
 
 
 class LinePlotParams(Params):
@@ -226,6 +231,7 @@ class LinePlotParams(Params):
     y: list[str] = Field(min_length=1, description="results columns on the y axis (one panel each)")
     group_by: str = Field("input", description="column that separates the lines")
     logx: bool = False
+    normalize: bool = Field(False, description="divide each line by its value at the smallest x")
     title: str = ""
 
 
@@ -246,9 +252,12 @@ def line_plot_report(experiment, results, params: LinePlotParams) -> ReportOutpu
             raise ConfigError(f"line_plot: no rows have both {params.x!r} and {y!r}")
         for group, pts in groups.items():
             pts.sort()
-            ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", label=group)
+            if params.normalize and pts[0][1] == 0:
+                raise ConfigError(f"line_plot {params.name}: cannot normalise {y!r} by its value 0 at {params.x}={pts[0][0]}")
+            scale = pts[0][1] if params.normalize else 1.0
+            ax.plot([p[0] for p in pts], [p[1] / scale for p in pts], marker="o", label=group)
         ax.set_xlabel(params.x)
-        ax.set_ylabel(y)
+        ax.set_ylabel(f"{y} / value at {params.x.split('.')[-1]}={pts[0][0]:g}" if params.normalize else y)
         if params.logx:
             ax.set_xscale("symlog", linthresh=1e-4)
         ax.grid(alpha=0.3)

@@ -1,0 +1,277 @@
+"""Cleaning and validating a triangle mesh before the science stages.
+
+The repairs, in this order:
+
+1. drop unreferenced (isolated) vertices (``igl.remove_unreferenced``);
+2. merge duplicated vertices (``igl.remove_duplicate_vertices``). libigl snaps the
+   coordinates to a grid of spacing ``eps = merge_tolerance * bbox_diagonal`` and
+   merges vertices in the same cell, so two points closer than ``eps`` usually, but
+   not always, merge (they may straddle a cell border); with ``merge_tolerance=0``
+   only exactly equal positions merge. The vertex order is kept (libigl sorts
+   it; see :func:`merge_duplicate_vertices`). The default 1e-9 merges the copies of a
+   vertex that OBJ/STL writers duplicate per face and nothing a modeller meant
+   to keep apart;
+3. drop degenerate faces: faces with a repeated vertex index (often created by
+   step 2) or an area of exactly 0.0 in floating point. Removing a zero-area face
+   with three distinct (collinear) vertices can open a hole, which the
+   topology report after cleaning then shows;
+4. drop duplicated faces: faces with the same three vertices in any order or
+   orientation; the first occurrence is kept;
+5. handle several connected components (``components``): keep them all, keep the
+   one with the most faces (ties: the lowest component id), or fail;
+6. drop the vertices orphaned by steps 3–5.
+
+The topology of the mesh before and after (:func:`~stages.mesh.topology.topology_report`)
+is part of the result, so a run's table shows genus, components, Euler
+characteristic and manifoldness of every input.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from pipeline.errors import InputError
+from pipeline.params import Params
+from pipeline.registry import stage
+from pipeline.result import StageResult
+from stages.mesh.measures import bbox_diagonal
+from stages.mesh.mesh import Mesh
+from stages.mesh.topology import TopologyReport, topology_report
+
+
+class CleanParams(Params):
+    """Parameters of :func:`clean`."""
+
+    merge_tolerance: float = Field(
+        1e-9, ge=0, allow_inf_nan=False,
+        description="merge vertices closer than merge_tolerance * bounding-box diagonal "
+                    "(libigl grid snapping, coordinate-wise); 0 merges exact duplicates only",
+    )
+    drop_degenerate: bool = Field(True, description="drop faces with a repeated vertex index or zero area")
+    drop_duplicate_faces: bool = Field(True, description="drop faces with the same three vertices as an earlier face (any order)")
+    components: Literal["keep_all", "largest", "fail"] = Field(
+        "keep_all", description="several connected components: keep all, keep the one with most faces, or fail")
+    fail_on_nonmanifold: bool = Field(False, description="fail if non-manifold edges or vertices remain after cleaning")
+
+
+@dataclass(frozen=True, eq=False)
+class CleanResult(StageResult):
+    """A cleaned mesh, its topology before and after, and what was removed.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        The cleaned mesh (same name as the input).
+    before, after : TopologyReport
+        Topology of the input and of the cleaned mesh.
+    merged_vertices : int
+        Vertices removed by merging duplicates.
+    unreferenced_vertices : int
+        Isolated vertices of the input plus vertices orphaned by dropping
+        degenerate or duplicated faces.
+    degenerate_faces, duplicate_faces : int
+        Faces dropped as degenerate / as duplicates.
+    dropped_components : int
+        Components dropped by ``components='largest'``.
+    dropped_component_faces, dropped_component_vertices : int
+        Faces and vertices of those components.
+    """
+
+    mesh: Mesh
+    before: TopologyReport
+    after: TopologyReport
+    merged_vertices: int
+    unreferenced_vertices: int
+    degenerate_faces: int
+    duplicate_faces: int
+    dropped_components: int
+    dropped_component_faces: int
+    dropped_component_vertices: int
+
+    def summary(self) -> dict:
+        a = self.after
+        return {
+            "vertices": self.mesh.n_vertices,
+            "faces": self.mesh.n_faces,
+            "merged_vertices": self.merged_vertices,
+            "unreferenced_vertices": self.unreferenced_vertices,
+            "degenerate_faces": self.degenerate_faces,
+            "duplicate_faces": self.duplicate_faces,
+            "dropped_components": self.dropped_components,
+            "components": a.n_components,
+            "genus": a.genus,
+            "euler": a.euler_characteristic,
+            "boundary_loops": a.n_boundary_loops,
+            "closed": a.is_closed,
+            "manifold": a.is_manifold,
+            "nonmanifold_edges": a.n_nonmanifold_edges,
+            "nonmanifold_vertices": a.n_nonmanifold_vertices,
+        }
+
+
+def _remove_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    import igl
+
+    NV, NF, _, _ = igl.remove_unreferenced(V, F)
+    return np.ascontiguousarray(NV, dtype=np.float64), np.ascontiguousarray(NF, dtype=np.int64).reshape(-1, 3)
+
+
+def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
+    """Merge vertices that ``igl.remove_duplicate_vertices`` finds equal up to ``eps``, keeping the vertex order.
+
+    libigl returns the unique vertices sorted by position; here each merged group is
+    represented by its first vertex and keeps that vertex's place, so a mesh
+    without duplicates comes back unchanged.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+    eps : float
+        Absolute grid spacing of libigl's snapping (0: exact duplicates only).
+
+    Returns
+    -------
+    V : (k, 3) float64
+        ``k <= n`` vertices, in the order of their first occurrence in the input.
+    F : (m, 3) int64
+        The faces re-indexed (faces may now repeat an index).
+    """
+    import igl
+
+    _, _, SVJ, _ = igl.remove_duplicate_vertices(V, F, eps)
+    groups, first = np.unique(np.asarray(SVJ, dtype=np.int64), return_index=True)
+    if groups.size == V.shape[0]:
+        return V, F
+    rank = np.empty(groups.size, dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(groups.size)
+    new_index = rank[SVJ]
+    return np.ascontiguousarray(V[np.sort(first)]), np.ascontiguousarray(new_index[F])
+
+
+def degenerate_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Mask of degenerate faces.
+
+    Parameters
+    ----------
+    V : (n, 3) float64
+    F : (m, 3) int64
+
+    Returns
+    -------
+    (m,) bool
+        True for faces with a repeated vertex index or a floating-point area of exactly 0.
+    """
+    import igl
+
+    repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
+    if F.shape[0] == 0:
+        return repeated
+    return repeated | (igl.doublearea(V, F) == 0.0)
+
+
+def duplicate_faces(F: np.ndarray) -> np.ndarray:
+    """Mask of faces (m, 3) whose vertex set equals that of an earlier face (any order or orientation)."""
+    if F.shape[0] == 0:
+        return np.zeros(0, dtype=bool)
+    _, first = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
+    dup = np.ones(F.shape[0], dtype=bool)
+    dup[first] = False
+    return dup
+
+
+def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
+    """Repair and validate ``mesh`` (see the module docstring for the steps).
+
+    Parameters
+    ----------
+    mesh : Mesh
+        ``V`` (n, 3) float64, ``F`` (m, 3) int64.
+    params : CleanParams, optional
+        Defaults when omitted.
+
+    Returns
+    -------
+    CleanResult
+
+    Raises
+    ------
+    InputError
+        Named after ``mesh.name``: no faces (before or after cleaning), several
+        components with ``components='fail'``, non-manifold elements with
+        ``fail_on_nonmanifold=True``.
+    """
+    import igl
+
+    params = params or CleanParams()
+    before = topology_report(mesh)
+    if mesh.n_faces == 0:
+        raise InputError(mesh.name, "mesh has no faces")
+
+    V, F = _remove_unreferenced(mesh.V, mesh.F)
+    unreferenced = mesh.n_vertices - V.shape[0]
+
+    n_before = V.shape[0]
+    V, F = merge_duplicate_vertices(V, F, params.merge_tolerance * bbox_diagonal(V))
+    merged = n_before - V.shape[0]
+
+    n_degenerate = n_duplicate = 0
+    if params.drop_degenerate:
+        bad = degenerate_faces(V, F)
+        n_degenerate = int(bad.sum())
+        F = F[~bad]
+    if params.drop_duplicate_faces:
+        dup = duplicate_faces(F)
+        n_duplicate = int(dup.sum())
+        F = F[~dup]
+    if F.shape[0] == 0:
+        raise InputError(mesh.name, f"no faces left after cleaning ({n_degenerate} degenerate and "
+                                    f"{n_duplicate} duplicated faces of {mesh.n_faces} were dropped)")
+    n_before = V.shape[0]
+    V, F = _remove_unreferenced(V, F)
+    unreferenced += n_before - V.shape[0]
+
+    labels = np.asarray(igl.vertex_components(F), dtype=np.int64)
+    face_label = labels[F[:, 0]]
+    n_components = int(labels.max()) + 1
+    dropped_components = dropped_faces = dropped_vertices = 0
+    if n_components > 1 and params.components == "fail":
+        raise InputError(mesh.name, f"mesh has {n_components} connected components; "
+                                    "pass clean.components=largest or clean.components=keep_all")
+    if n_components > 1 and params.components == "largest":
+        keep = int(np.argmax(np.bincount(face_label, minlength=n_components)))
+        mask = face_label == keep
+        dropped_components = n_components - 1
+        dropped_faces = int((~mask).sum())
+        n_before = V.shape[0]
+        V, F = _remove_unreferenced(V, F[mask])
+        dropped_vertices = n_before - V.shape[0]
+
+    cleaned = Mesh(V, F, name=mesh.name)
+    after = topology_report(cleaned)
+    if params.fail_on_nonmanifold and not after.is_manifold:
+        raise InputError(mesh.name, f"mesh has {after.n_nonmanifold_edges} non-manifold edges and "
+                                    f"{after.n_nonmanifold_vertices} non-manifold vertices after cleaning; "
+                                    "repair it (e.g. in MeshLab) or pass clean.fail_on_nonmanifold=false")
+    return CleanResult(
+        mesh=cleaned,
+        before=before,
+        after=after,
+        merged_vertices=int(merged),
+        unreferenced_vertices=int(unreferenced),
+        degenerate_faces=n_degenerate,
+        duplicate_faces=n_duplicate,
+        dropped_components=dropped_components,
+        dropped_component_faces=dropped_faces,
+        dropped_component_vertices=dropped_vertices,
+    )
+
+
+@stage("clean", params=CleanParams, version=1, consumes=("mesh",), produces=("mesh",))
+def clean(mesh: Mesh, *, params: CleanParams) -> CleanResult:
+    """Merge duplicate vertices, drop unreferenced vertices, degenerate and duplicated faces; report topology."""
+    return clean_mesh(mesh, params)

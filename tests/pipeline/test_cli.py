@@ -1,0 +1,97 @@
+"""The CLI as a user meets it: exit codes and one-line messages that name the file and the problem."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def topomatch(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "pipeline.cli", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def test_help_everywhere():
+    for args in ([], ["run"], ["validate"], ["stages"]):
+        r = topomatch(*args, "--help")
+        assert r.returncode == 0 and "usage: topomatch" in r.stdout
+
+
+def test_stages_lists_every_stage_with_params():
+    r = topomatch("stages", "--json")
+    assert r.returncode == 0
+    listing = json.loads(r.stdout)
+    assert {"load", "clean", "decimate", "noise", "transform", "measures"} <= set(listing["stages"])
+    noise = {p["name"]: p for p in listing["stages"]["noise"]["params"]}
+    assert noise["sigma"]["type"] == "float"
+    text = topomatch("stages").stdout
+    assert "decimate" in text and "relative_to" in text
+
+
+def test_missing_config_file(tmp_path):
+    r = topomatch("run", tmp_path / "nope.yaml", "--out", tmp_path)
+    assert r.returncode == 1
+    assert "nope.yaml: config file not found" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_missing_mesh_file(small_config, write_config, tmp_path):
+    small_config["inputs"]["meshes"] = [str(tmp_path / "gone.off")]
+    r = topomatch("run", write_config(small_config), "--out", tmp_path)
+    assert r.returncode == 1
+    assert "gone.off: file not found" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_malformed_off_fails_its_item_and_keeps_the_others(small_config, write_config, tmp_path):
+    bad = tmp_path / "malformed.off"
+    bad.write_text("OFF\n4 2 0\n0 0 0\n1 0 0\n0 1\n")
+    small_config["inputs"]["meshes"].append(str(bad))
+    small_config["sweep"] = {}
+    r = topomatch("run", write_config(small_config), "--out", tmp_path / "runs", "--no-progress")
+    assert r.returncode == 1
+    assert "1 of 3 items failed" in r.stderr and "malformed.off: malformed OFF file" in r.stderr
+    assert "Traceback" not in r.stderr
+    results = list((tmp_path / "runs").glob("small-*/tables/results.csv"))
+    assert results and results[0].read_text().count("\n") == 4  # header + 3 rows, 2 of them ok
+
+
+def test_unknown_config_key(small_config, write_config):
+    small_config["stages"][1] = {"clean": {"merge_tolerence": 0.1}}
+    r = topomatch("validate", write_config(small_config, "typo"))
+    assert r.returncode == 2
+    assert "typo.yaml: stages[1].clean.merge_tolerence: unknown key" in r.stderr
+    assert "Traceback" not in r.stderr
+
+
+def test_wrong_type(small_config, write_config):
+    small_config["stages"][2] = {"noise": {"sigma": "a lot"}}
+    r = topomatch("validate", write_config(small_config))
+    assert r.returncode == 2
+    assert "stages[2].noise.sigma: Input should be a valid number, got 'a lot'" in r.stderr
+
+
+def test_bad_override_value(small_config, write_config):
+    r = topomatch("validate", write_config(small_config), "--set", "noise.seed=1.5")
+    assert r.returncode == 2 and "stages[2].noise.seed" in r.stderr
+
+
+def test_debug_shows_traceback(tmp_path):
+    r = topomatch("--debug", "validate", tmp_path / "nope.yaml")
+    assert r.returncode != 0 and "Traceback" in r.stderr
+
+
+def test_validate_ok(small_config, write_config):
+    r = topomatch("validate", write_config(small_config))
+    assert r.returncode == 0 and "ok (small: 2 inputs, 2 sweep points, 4 stages" in r.stdout
+
+
+@pytest.mark.slow
+def test_run_then_rerun_hits_the_cache(small_config, write_config, tmp_path):
+    cfg = write_config(small_config)
+    first = topomatch("run", cfg, "--out", tmp_path / "runs", "--no-progress")
+    assert first.returncode == 0, first.stderr
+    second = topomatch("run", cfg, "--out", tmp_path / "runs", "--no-progress")
+    assert "cache hits 16/16" in second.stdout

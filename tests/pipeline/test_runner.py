@@ -1,0 +1,154 @@
+"""Runner: run folder contents, cache hits and misses, resume after interruption, executors agree."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+from pydantic import Field
+
+from pipeline.config import build_experiment
+from pipeline.params import Params
+from pipeline.registry import STAGES, discover, stage
+from pipeline.result import StageResult
+from pipeline.runner import run_experiment
+
+
+def _run(config: dict, tmp_path, **kw):
+    return run_experiment(build_experiment(config), out_root=tmp_path / "runs", progress=False, **kw)
+
+
+def _stage_hits(outcome) -> dict[str, dict[str, bool]]:
+    return {r.item_id: dict(r.cache_hits) for r in outcome.items}
+
+
+def test_run_folder_has_config_manifest_tables_index(small_config, tmp_path):
+    small_config["reports"] = [{"table": {"name": "areas", "columns": ["item", "measures.area*"]}}]
+    outcome = _run(small_config, tmp_path)
+    d = outcome.run_dir
+    for name in ("config.yaml", "manifest.json", "index.html", "tables/results.csv", "tables/areas.csv"):
+        assert (d / name).is_file(), name
+    manifest = json.loads((d / "manifest.json").read_text())
+    assert manifest["n_items"] == 4 and manifest["n_failed"] == 0
+    assert manifest["packages"]["numpy"] == np.__version__
+    assert manifest["seeds"] == {"noise.seed": 3}
+    assert all(set(item["seconds"]) == {"load", "clean", "noise", "measures"} for item in manifest["items"])
+    rows = json.loads((d / "tables" / "areas.json").read_text())
+    assert len(rows) == 4 and all(row["measures.area"] > 0 for row in rows)
+
+
+def test_second_run_is_all_cache_hits_with_identical_results(small_config, tmp_path):
+    first = _run(small_config, tmp_path)
+    second = _run(small_config, tmp_path)
+    for item in first.items:  # sweep points of one mesh share load and clean, computed once
+        shared = item.sweep["noise.sigma"] != 0.0
+        assert item.cache_hits == {"load": shared, "clean": shared, "noise": False, "measures": False}
+    assert all(h for hits in _stage_hits(second).values() for h in hits.values())
+    for a, b in zip(first.items, second.items):
+        np.testing.assert_array_equal(a.final("mesh").V, b.final("mesh").V)
+
+
+def test_changed_param_recomputes_only_downstream(small_config, tmp_path):
+    _run(small_config, tmp_path)
+    small_config["stages"][2] = {"noise": {"sigma": 0.0, "relative_to": "bbox_diagonal", "seed": 4}}
+    again = _run(small_config, tmp_path)
+    for item in again.items:
+        assert item.cache_hits["load"] and item.cache_hits["clean"]
+        if item.sweep["noise.sigma"] > 0:
+            assert not item.cache_hits["noise"] and not item.cache_hits["measures"]
+        else:
+            # sigma = 0 with another seed is another cache key too: the key is the params, not the output
+            assert not item.cache_hits["noise"]
+
+
+def test_stage_version_bump_is_a_miss(small_config, tmp_path, monkeypatch):
+    before = _run(small_config, tmp_path)
+    discover()
+    monkeypatch.setitem(STAGES, "clean", dataclasses.replace(STAGES["clean"], version=STAGES["clean"].version + 1))
+    again = _run(small_config, tmp_path)
+    for old, item in zip(before.items, again.items):
+        assert item.cache_hits["load"] and item.keys["load"] == old.keys["load"]
+        assert item.keys["clean"] != old.keys["clean"] and item.keys["noise"] != old.keys["noise"]
+        if item.sweep["noise.sigma"] == 0.0:  # the first item of each mesh recomputes clean
+            assert not item.cache_hits["clean"] and not item.cache_hits["noise"]
+
+
+class _BoomParams(Params):
+    fail_on: str = Field("", description="interrupt when the mesh has this name")
+
+
+@dataclasses.dataclass(frozen=True)
+class _BoomResult(StageResult):
+    name: str
+
+
+CALLS: list[str] = []
+
+
+@stage("test_interrupt", params=_BoomParams, version=1, consumes=("mesh",), produces=())
+def _interrupting_stage(mesh, *, params):
+    """Test stage: simulates a crash (Ctrl-C) on one mesh."""
+    CALLS.append(mesh.name)
+    if mesh.name == params.fail_on:
+        raise KeyboardInterrupt
+    return _BoomResult(mesh.name)
+
+
+def test_interrupted_run_resumes_without_recomputing(small_config, tmp_path):
+    small_config["sweep"] = {}
+    small_config["stages"] = ["load", {"clean": {}}, {"test_interrupt": {"fail_on": "eight_genus2"}}]
+    CALLS.clear()
+    with pytest.raises(KeyboardInterrupt):
+        _run(small_config, tmp_path)
+    assert CALLS == ["torus", "eight_genus2"]
+    small_config["stages"][2] = {"test_interrupt": {"fail_on": "nothing"}}
+    CALLS.clear()
+    outcome = _run(small_config, tmp_path)
+    hits = _stage_hits(outcome)
+    assert hits["torus.off"]["load"] and hits["torus.off"]["clean"]
+    assert hits["eight_genus2.off"]["load"] and hits["eight_genus2.off"]["clean"], "finished stages are kept"
+    assert CALLS == ["torus", "eight_genus2"]  # the params changed, so this stage reruns
+
+
+def test_failed_item_does_not_stop_the_others(small_config, tmp_path):
+    bad = tmp_path / "broken.off"
+    bad.write_text("OFF\n3 1 0\n0 0 0\n1 0\n")
+    small_config["inputs"]["meshes"].insert(0, str(bad))
+    small_config["sweep"] = {}
+    outcome = _run(small_config, tmp_path)
+    assert [r.ok for r in outcome.items] == [False, True, True]
+    assert "broken.off" in outcome.items[0].error and "malformed OFF" in outcome.items[0].error
+    rows = json.loads((outcome.run_dir / "tables" / "results.json").read_text())
+    assert [row["status"] for row in rows] == ["failed", "ok", "ok"]
+
+
+def _finals(outcome):
+    return {r.item_id: (r.final("mesh").V, r.row()) for r in outcome.items}
+
+
+@pytest.mark.slow
+def test_executors_give_identical_results(small_config, tmp_path):
+    inline = _run(small_config, tmp_path / "a", use_cache=False)
+    small_config["executor"] = {"kind": "local", "workers": 2}
+    pool = _run(small_config, tmp_path / "b", use_cache=False)
+    small_config["executor"] = {"kind": "dask", "workers": 2}
+    dask = _run(small_config, tmp_path / "c", use_cache=False)
+    ref = _finals(inline)
+    for other in (_finals(pool), _finals(dask)):
+        assert other.keys() == ref.keys()
+        for key, (V, row) in ref.items():
+            np.testing.assert_array_equal(other[key][0], V)
+            assert {k: v for k, v in other[key][1].items() if "seconds" not in k} == \
+                   {k: v for k, v in row.items() if "seconds" not in k}
+
+
+@pytest.mark.slow
+def test_dask_executor_connects_to_an_existing_scheduler(small_config, tmp_path):
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        small_config["executor"] = {"kind": "dask", "address": cluster.scheduler_address}
+        outcome = _run(small_config, tmp_path)
+    assert len(outcome.items) == 4 and not outcome.failed

@@ -1,0 +1,144 @@
+"""The clean stage repairs vertex soups, degenerate and duplicated faces, and handles components."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydantic import ValidationError
+
+from pipeline.errors import ConfigError, InputError
+from stages.mesh.clean import CleanParams, clean, clean_mesh
+from stages.mesh.mesh import Mesh
+
+
+def _with_isolated_vertex(mesh: Mesh, position=(5.0, 5.0, 5.0)) -> Mesh:
+    return Mesh(np.vstack([mesh.V, position]), mesh.F, name=mesh.name)
+
+
+def test_soup_with_isolated_vertex_becomes_the_closed_octahedron(shapes):
+    octa = shapes.octahedron()
+    broken = _with_isolated_vertex(shapes.soup(octa))  # 24 + 1 vertices, 8 faces
+    result = clean(broken, params=CleanParams())
+    assert result.merged_vertices == 24 - 6
+    assert result.unreferenced_vertices == 1
+    assert (result.degenerate_faces, result.duplicate_faces, result.dropped_components) == (0, 0, 0)
+    assert (result.mesh.n_vertices, result.mesh.n_faces) == (6, 8)
+    # the soup: 8 separate triangles, all edges on the boundary; the result: a closed sphere
+    assert (result.before.n_components, result.before.n_boundary_edges, result.before.is_closed) == (8, 24, False)
+    assert result.after.is_closed and result.after.is_manifold
+    assert (result.after.genus, result.after.euler_characteristic, result.after.n_components) == (0, 2, 1)
+    # same triangles as the original
+    np.testing.assert_allclose(np.sort(result.mesh.V[result.mesh.F].reshape(-1, 9), axis=0),
+                               np.sort(octa.V[octa.F].reshape(-1, 9), axis=0))
+    assert result.mesh.name == "octahedron"
+    s = result.summary()
+    assert s["merged_vertices"] == 18 and s["unreferenced_vertices"] == 1 and s["genus"] == 0 and s["closed"]
+
+
+def test_stl_soup_of_bundled_torus_is_repaired(tmp_path, bundled_mesh):
+    import igl
+
+    from stages.mesh.io import read_mesh
+
+    torus = bundled_mesh("torus.off")
+    path = tmp_path / "torus.stl"
+    igl.write_triangle_mesh(str(path), torus.V, torus.F, igl.FileEncoding.Binary)  # float32 corners
+    soup, _ = read_mesh(path)
+    assert soup.n_vertices == 3 * torus.n_faces
+    result = clean_mesh(soup)
+    assert (result.mesh.n_vertices, result.mesh.n_faces) == (torus.n_vertices, torus.n_faces)
+    assert result.after.genus == 1 and result.after.is_closed
+
+
+def test_merge_tolerance_is_relative_to_the_bbox_diagonal(shapes):
+    octa = shapes.octahedron()
+    soup = shapes.soup(octa)
+    rng = np.random.default_rng(3)
+    diag = 2 * np.sqrt(3)
+    jitter = rng.uniform(-1, 1, soup.V.shape) * 1e-13 * diag
+    near = clean_mesh(soup.with_vertices(soup.V + jitter))
+    # jitter 1e-13 * diag << grid cell 1e-9 * diag, and the coordinates 0, +-1 lie far from cell borders
+    assert near.mesh.n_vertices == 6
+    exact = clean_mesh(soup.with_vertices(soup.V + jitter), CleanParams(merge_tolerance=0.0))
+    assert exact.merged_vertices == 0 and exact.mesh.n_vertices == 24
+    coarse = clean_mesh(soup.with_vertices(soup.V + 1e4 * jitter), CleanParams(merge_tolerance=1e-3))
+    assert coarse.mesh.n_vertices == 6
+
+
+def test_degenerate_and_duplicate_faces_are_dropped(shapes):
+    octa = shapes.octahedron()
+    V = np.vstack([octa.V, [[0.5, 0.5, 0.0]]])  # vertex 6 on the segment 0-2: collinear face (0, 6, 2)
+    F = np.vstack([octa.F,
+                   [[0, 0, 4]],          # repeated index
+                   [[0, 6, 2]],          # zero area (three distinct collinear vertices)
+                   octa.F[3][::-1],      # the same face, reversed
+                   octa.F[5]])           # an exact copy
+    result = clean_mesh(Mesh(V, F, name="octa"))
+    assert result.degenerate_faces == 2
+    assert result.duplicate_faces == 2
+    assert result.unreferenced_vertices == 1  # vertex 6 was used only by the dropped zero-area face
+    assert result.mesh.n_faces == 8 and result.after.is_closed and result.after.genus == 0
+
+
+def test_repairs_can_be_switched_off(shapes):
+    octa = shapes.octahedron()
+    F = np.vstack([octa.F, octa.F[:1]])
+    kept = clean_mesh(Mesh(octa.V, F), CleanParams(drop_duplicate_faces=False))
+    assert kept.mesh.n_faces == 9 and kept.after.n_nonmanifold_edges == 3
+    F = np.vstack([octa.F, [[0, 0, 1]]])
+    kept = clean_mesh(Mesh(octa.V, F), CleanParams(drop_degenerate=False))
+    assert kept.mesh.n_faces == 9 and kept.degenerate_faces == 0
+
+
+def test_components(shapes):
+    octa, ico = shapes.octahedron(), shapes.icosphere(1)  # 8 and 80 faces
+    two = shapes.disjoint_union(octa, ico, name="pair")
+    all_kept = clean_mesh(two)
+    assert all_kept.after.n_components == 2 and all_kept.mesh.n_faces == 88
+
+    largest = clean_mesh(two, CleanParams(components="largest"))
+    assert (largest.mesh.n_faces, largest.mesh.n_vertices) == (ico.n_faces, ico.n_vertices)
+    assert (largest.dropped_components, largest.dropped_component_faces, largest.dropped_component_vertices) == (1, 8, 6)
+    np.testing.assert_allclose(largest.mesh.V.mean(axis=0), [3.0, 0.0, 0.0], atol=1e-12)  # the moved icosphere
+    assert largest.after.n_components == 1
+
+    with pytest.raises(InputError) as info:
+        clean_mesh(two, CleanParams(components="fail"))
+    assert "pair" in str(info.value) and "2 connected components" in str(info.value)
+    assert "clean.components=largest" in str(info.value)
+
+
+def test_fail_on_nonmanifold(shapes):
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]], float)
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    fan = Mesh(V, F, name="fan")
+    assert clean_mesh(fan).after.n_nonmanifold_edges == 1
+    with pytest.raises(InputError, match="fan: mesh has 1 non-manifold edges"):
+        clean_mesh(fan, CleanParams(fail_on_nonmanifold=True))
+    assert clean_mesh(shapes.octahedron(), CleanParams(fail_on_nonmanifold=True)).after.is_manifold
+
+
+def test_nothing_left_is_an_input_error():
+    V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0]], float)
+    with pytest.raises(InputError, match="line: no faces left"):
+        clean_mesh(Mesh(V, np.array([[0, 1, 2]]), name="line"))
+    with pytest.raises(InputError, match="nofaces: mesh has no faces"):
+        clean_mesh(Mesh(V, np.zeros((0, 3), np.int64), name="nofaces"))
+
+
+@pytest.mark.parametrize("name", ["torus.off", "eight_genus2.off", "odedstein_hand_lowres.obj.gz"])
+def test_clean_meshes_pass_unchanged(bundled_mesh, name):
+    mesh = bundled_mesh(name)
+    result = clean_mesh(mesh)
+    np.testing.assert_array_equal(result.mesh.V, mesh.V)
+    np.testing.assert_array_equal(result.mesh.F, mesh.F)
+    assert result.before == result.after
+
+
+def test_params_validation():
+    with pytest.raises(ValidationError):
+        CleanParams(merge_tolerance=-1.0)
+    with pytest.raises(ConfigError, match=r"stages\[1\].clean.components"):
+        CleanParams.parse({"components": "biggest"}, "stages[1].clean")
+    with pytest.raises(ConfigError, match="unknown key"):
+        CleanParams.parse({"largest_component": True}, "stages[1].clean")

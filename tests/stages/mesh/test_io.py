@@ -1,0 +1,133 @@
+"""Reading meshes: every format round-trips through a reference writer; every failure names the file."""
+
+from __future__ import annotations
+
+import gzip
+import shutil
+
+import numpy as np
+import pytest
+
+from pipeline.errors import InputError
+from stages.mesh.io import LoadParams, load, read_mesh
+
+
+def _gzip(path):
+    gz = path.with_name(path.name + ".gz")
+    with open(path, "rb") as src, gzip.open(gz, "wb") as dst:
+        shutil.copyfileobj(src, dst)
+    return gz
+
+
+@pytest.mark.parametrize("suffix,binary", [(".off", False), (".obj", False), (".ply", True), (".ply", False)])
+@pytest.mark.parametrize("gzipped", [False, True])
+def test_igl_written_files_read_back(tmp_path, bundled_mesh, suffix, binary, gzipped):
+    import igl
+
+    ref = bundled_mesh("torus.off")
+    path = tmp_path / f"torus{suffix}"
+    encoding = igl.FileEncoding.Binary if binary else igl.FileEncoding.Ascii
+    igl.write_triangle_mesh(str(path), ref.V, ref.F, encoding)
+    if gzipped:
+        path = _gzip(path)
+    mesh, reader = read_mesh(path)
+    # libigl's ASCII PLY writer prints 6 significant digits; OFF/OBJ and binary PLY keep the values.
+    rtol = 1e-5 if (suffix == ".ply" and not binary) else 1e-12
+    np.testing.assert_allclose(mesh.V, ref.V, rtol=rtol, atol=1e-12)
+    np.testing.assert_array_equal(mesh.F, ref.F)
+    assert mesh.name == "torus"
+    assert mesh.V.dtype == np.float64 and mesh.F.dtype == np.int64
+    assert mesh.V.flags.c_contiguous and mesh.F.flags.c_contiguous
+
+
+@pytest.mark.parametrize("binary", [False, True])
+@pytest.mark.parametrize("gzipped", [False, True])
+def test_stl_reads_back_the_same_triangles(tmp_path, shapes, binary, gzipped):
+    """STL stores each triangle with its own corners, so compare corner positions V[F]."""
+    import igl
+
+    ref = shapes.octahedron()
+    path = tmp_path / "octa.stl"
+    encoding = igl.FileEncoding.Binary if binary else igl.FileEncoding.Ascii
+    igl.write_triangle_mesh(str(path), ref.V, ref.F, encoding)
+    if gzipped:
+        path = _gzip(path)
+    mesh, _ = read_mesh(path)
+    assert mesh.n_faces == ref.n_faces
+    np.testing.assert_allclose(mesh.V[mesh.F], ref.V[ref.F], atol=1e-7)
+
+
+@pytest.mark.parametrize("ascii", [True, False])
+def test_open3d_written_ply_reads_back(tmp_path, bundled_mesh, ascii):
+    import open3d as o3d
+
+    from stages.adapters.open3d_adapter import to_open3d
+
+    ref = bundled_mesh("eight_genus2.off")
+    path = tmp_path / "eight.ply"
+    assert o3d.io.write_triangle_mesh(str(path), to_open3d(ref), write_ascii=ascii)
+    mesh, _ = read_mesh(path)
+    np.testing.assert_allclose(mesh.V, ref.V, atol=1e-6 * np.abs(ref.V).max())
+    np.testing.assert_array_equal(mesh.F, ref.F)
+
+
+def test_bundled_obj_gz_reads(bundled_mesh):
+    mesh = bundled_mesh("odedstein_spot_low_resolution.obj.gz")
+    assert mesh.name == "odedstein_spot_low_resolution"
+    assert mesh.n_faces > 1000 and mesh.F.max() < mesh.n_vertices
+
+
+def test_load_stage_result(tmp_path, shapes):
+    import igl
+
+    ref = shapes.octahedron()
+    path = tmp_path / "octa.off"
+    igl.write_triangle_mesh(str(path), ref.V, ref.F)
+    result = load(str(path), params=LoadParams())
+    assert result.summary() == {"vertices": 6, "faces": 8, "reader": "igl"}
+    np.testing.assert_array_equal(result.mesh.F, ref.F)
+
+
+def _expect_input_error(path, *fragments):
+    with pytest.raises(InputError) as info:
+        read_mesh(path)
+    message = str(info.value)
+    assert path.name in message
+    for fragment in fragments:
+        assert fragment in message
+    return message
+
+
+def test_missing_file(tmp_path):
+    _expect_input_error(tmp_path / "nothere.off", "not found")
+
+
+def test_empty_file(tmp_path):
+    path = tmp_path / "empty.off"
+    path.write_bytes(b"")
+    _expect_input_error(path, "empty")
+
+
+def test_empty_gz_file(tmp_path):
+    path = tmp_path / "empty.off.gz"
+    with gzip.open(path, "wb"):
+        pass
+    _expect_input_error(path, "empty")
+
+
+def test_malformed_off(tmp_path):
+    path = tmp_path / "broken.off"
+    path.write_text("OFF\n3 1 0\n0 0 0\n1 0 zero\n")
+    _expect_input_error(path)
+
+
+def test_out_of_range_index(tmp_path):
+    path = tmp_path / "badindex.off"
+    path.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n")
+    _expect_input_error(path)
+
+
+def test_unsupported_suffix(tmp_path):
+    path = tmp_path / "mesh.xyz"
+    path.write_text("0 0 0\n")
+    _expect_input_error(path, "unsupported")

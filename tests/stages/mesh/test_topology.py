@@ -1,0 +1,123 @@
+"""Topology report: genus, boundary loops, components and manifoldness against known answers and libigl."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from stages.mesh.mesh import Mesh
+from stages.mesh.topology import edge_incidence, topology_report
+
+
+@pytest.mark.parametrize("name,genus", [("torus.off", 1), ("eight_genus2.off", 2),
+                                        ("odedstein_spot_low_resolution.obj.gz", 0)])
+def test_genus_of_bundled_closed_meshes(bundled_mesh, name, genus):
+    import igl
+
+    mesh = bundled_mesh(name)
+    r = topology_report(mesh)
+    assert r.genus == genus
+    assert r.euler_characteristic == 2 - 2 * genus == igl.euler_characteristic(mesh.F)
+    assert r.is_closed and r.is_manifold and r.is_orientable
+    assert r.n_components == 1 and r.n_boundary_loops == 0 and r.n_boundary_edges == 0
+    assert r.n_edges == igl.edges(mesh.F).shape[0]
+
+
+@pytest.mark.parametrize("builder,args", [("octahedron", ()), ("icosphere", (0,)), ("icosphere", (2,)),
+                                          ("unit_cube", ())])
+def test_sphere_like_meshes_have_genus_0(shapes, builder, args):
+    mesh = getattr(shapes, builder)(*args)
+    r = topology_report(mesh)
+    assert (r.genus, r.euler_characteristic, r.n_components) == (0, 2, 1)
+    assert r.n_edges == 3 * mesh.n_faces // 2  # closed triangle mesh: 3F = 2E
+    assert r.is_closed and r.is_manifold
+
+
+def test_one_missing_face_is_one_boundary_loop(shapes):
+    import igl
+
+    octa = shapes.octahedron()
+    disc = Mesh(octa.V, octa.F[1:])
+    r = topology_report(disc)
+    assert r.n_boundary_loops == 1 == len(igl.boundary_loop_all(disc.F))
+    assert r.n_boundary_edges == 3
+    assert (r.euler_characteristic, r.genus) == (1, 0)
+    assert not r.is_closed and r.is_manifold
+
+
+def test_two_holes_in_a_torus(bundled_mesh):
+    torus = bundled_mesh("torus.off")
+    # remove two faces that share no vertex: two boundary loops, genus still 1
+    f0 = torus.F[0]
+    far = next(i for i, f in enumerate(torus.F) if not set(f) & set(f0) and i > 0)
+    keep = np.ones(torus.n_faces, bool)
+    keep[[0, far]] = False
+    r = topology_report(Mesh(torus.V, torus.F[keep]))
+    assert (r.n_boundary_loops, r.n_boundary_edges, r.genus) == (2, 6, 1)
+    assert r.euler_characteristic == -2
+
+
+def test_disjoint_components_are_counted_and_genus_adds(bundled_mesh, shapes):
+    two = shapes.disjoint_union(shapes.octahedron(), shapes.icosphere(1))
+    r = topology_report(two)
+    assert (r.n_components, r.euler_characteristic, r.genus) == (2, 4, 0)
+
+    mixed = shapes.disjoint_union(bundled_mesh("torus.off"), shapes.octahedron(), offsets=[(0, 0, 0), (10, 0, 0)])
+    r = topology_report(mixed)
+    assert (r.n_components, r.euler_characteristic, r.genus) == (2, 2, 1)
+
+
+def test_three_triangles_on_one_edge_are_non_manifold():
+    import igl
+
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1]], float)
+    F = np.array([[0, 1, 2], [1, 0, 3], [0, 1, 4]])
+    r = topology_report(Mesh(V, F))
+    assert r.n_nonmanifold_edges == 1
+    assert not r.is_manifold and r.genus is None and r.is_orientable is None
+    assert igl.is_edge_manifold(F)[0] is False
+    E, counts = edge_incidence(F)
+    assert counts[(E[:, 0] == 0) & (E[:, 1] == 1)].tolist() == [3]
+
+
+def test_bow_tie_vertex_is_non_manifold():
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [-1, 0, 0], [-1, -1, 0]], float)
+    F = np.array([[0, 1, 2], [0, 3, 4]])
+    r = topology_report(Mesh(V, F))
+    assert (r.n_nonmanifold_vertices, r.n_nonmanifold_edges, r.n_components) == (1, 0, 1)
+    assert not r.is_manifold and r.genus is None
+
+
+def _moebius(n: int = 12) -> Mesh:
+    V, F = [], []
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        for s in (-0.3, 0.3):
+            r = 1 + s * np.cos(a / 2)
+            V.append([r * np.cos(a), r * np.sin(a), s * np.sin(a / 2)])
+    for i in range(n):
+        a0, a1 = 2 * i, 2 * i + 1
+        b0, b1 = (2 * i + 2, 2 * i + 3) if i < n - 1 else (1, 0)  # the half twist
+        F += [[a0, b0, a1], [a1, b0, b1]]
+    return Mesh(np.array(V), np.array(F))
+
+
+def test_moebius_strip_is_non_orientable_with_one_boundary_loop():
+    r = topology_report(_moebius())
+    assert r.is_manifold and r.is_orientable is False
+    assert (r.n_boundary_loops, r.euler_characteristic) == (1, 0)
+    assert r.genus is None
+
+
+def test_unreferenced_vertices_do_not_change_the_euler_characteristic(shapes):
+    octa = shapes.octahedron()
+    V = np.insert(octa.V, 2, [9.0, 9.0, 9.0], axis=0)  # an isolated vertex in the middle of V
+    F = np.where(octa.F >= 2, octa.F + 1, octa.F)
+    r = topology_report(Mesh(V, F))
+    assert (r.euler_characteristic, r.genus, r.n_unreferenced_vertices, r.n_components) == (2, 0, 1, 1)
+    # (igl.euler_characteristic(F) would count max(F) + 1 = 7 vertices here and give 3)
+
+
+def test_empty_mesh():
+    r = topology_report(Mesh(np.zeros((2, 3)), np.zeros((0, 3), np.int64)))
+    assert (r.n_faces, r.n_unreferenced_vertices, r.genus, r.is_closed) == (0, 2, None, False)
