@@ -57,6 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
                        description="List every registered stage and report with parameters and defaults.")
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=cmd_stages)
+
+    from pipeline.skeleton_cli import add_parser as add_skeleton
+
+    add_skeleton(sub)
     return parser
 
 

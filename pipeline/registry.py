@@ -30,7 +30,12 @@ STAGE_MODULES: tuple[str, ...] = (
     "stages.mesh.transform",
     "stages.mesh.measures",
     "stages.crosscheck.decimation",
+    "stages.morse.stage",
+    "stages.reeb.level_sets",
+    "stages.reeb.reeb_graph",
+    "stages.reeb.prune",
     "pipeline.reports",
+    "pipeline.skeleton_reports",
 )
 
 

@@ -16,14 +16,17 @@ def face_shading(V: np.ndarray, F: np.ndarray, light: tuple[float, float, float]
     return 0.25 + 0.75 * np.abs(n @ l)
 
 
+#: Coordinate permutations that put a mesh's up axis along matplotlib's +z.
+UP_ORDER = {"x": (1, 2, 0), "y": (2, 0, 1), "z": (0, 1, 2)}
+
+
 def z_up(mesh: Mesh, up: str) -> Mesh:
-    """A copy of ``mesh`` rotated so that its ``up`` axis ('x', 'y' or 'z') points along +z (for display)."""
-    order = {"x": [1, 2, 0], "y": [2, 0, 1], "z": [0, 1, 2]}[up]
-    return Mesh(mesh.V[:, order], mesh.F, mesh.name)
+    """A copy of ``mesh`` with its ``up`` axis ('x', 'y' or 'z') along +z (a cyclic permutation, for display)."""
+    return Mesh(mesh.V[:, list(UP_ORDER[up])], mesh.F, mesh.name)
 
 
 def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "viridis",
-              color=(0.75, 0.78, 0.85), elev: float = 20.0, azim: float = -60.0) -> None:
+              color=(0.75, 0.78, 0.85), elev: float = 20.0, azim: float = -60.0, alpha: float = 1.0) -> None:
     """Draw ``mesh`` on a 3D axis, shaded; ``values`` (n,) colours it by a vertex function."""
     from matplotlib import colormaps
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
@@ -37,7 +40,7 @@ def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "
     else:
         base = np.broadcast_to(np.asarray(color, dtype=float), (len(F), 3))
     rgb = np.clip(base * shade, 0, 1)
-    poly = Poly3DCollection(V[F], facecolors=rgb, edgecolors="none", linewidths=0)
+    poly = Poly3DCollection(V[F], facecolors=rgb, edgecolors="none", linewidths=0, alpha=alpha)
     ax.add_collection3d(poly)
     lo, hi = V.min(axis=0), V.max(axis=0)
     mid, half = (lo + hi) / 2, (hi - lo).max() / 2 or 1.0
@@ -47,3 +50,24 @@ def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "
     ax.set_box_aspect((1, 1, 1))
     ax.view_init(elev=elev, azim=azim)
     ax.set_axis_off()
+
+
+def draw_skeleton(ax, graph, *, endpoints=(), up_order=(0, 1, 2), node_size: float = 6.0) -> None:
+    """Draw a skeleton graph (nodes with ``pos``) over a 3D axis; endpoints in red, root as a star.
+
+    ``up_order`` permutes the coordinates the same way :func:`z_up` does for the mesh.
+    """
+    order = list(up_order)
+    pos = {v: np.asarray(d["pos"], dtype=float)[order] for v, d in graph.nodes(data=True)}
+    for a, b in graph.edges():
+        p, q = pos[a], pos[b]
+        ax.plot([p[0], q[0]], [p[1], q[1]], [p[2], q[2]], color="black", lw=1.2, zorder=10)
+    inner = np.array([pos[v] for v in graph.nodes if v not in endpoints and v != "root"]).reshape(-1, 3)
+    ax.scatter(inner[:, 0], inner[:, 1], inner[:, 2], s=node_size, c="black", depthshade=False, zorder=11)
+    if len(endpoints):
+        ends = np.array([pos[v] for v in endpoints]).reshape(-1, 3)
+        ax.scatter(ends[:, 0], ends[:, 1], ends[:, 2], s=node_size * 5, c="red", depthshade=False, zorder=12)
+    if "root" in pos:
+        r = pos["root"]
+        ax.scatter([r[0]], [r[1]], [r[2]], s=node_size * 12, c="gold", marker="*", edgecolors="black",
+                   depthshade=False, zorder=13)

@@ -1,0 +1,66 @@
+"""The ``morse`` stage: compute a Morse function on the mesh vertices."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from pipeline.params import Params
+from pipeline.registry import stage
+from pipeline.result import StageResult
+from stages.mesh.mesh import Mesh
+from stages.morse.function import MorseFunction
+
+
+class MorseParams(Params):
+    """Parameters of :func:`morse`."""
+
+    function: Literal["mixture", "euclidean", "affine", "fiedler", "height", "geodesic"] = Field(
+        "mixture", description="mixture distance (thesis ch. 3), its Euclidean or affine part, the Fiedler "
+                               "vector (ch. 4), principal-axis height, or heat geodesic distance from the centroid")
+    centroid: Literal["vertices", "area", "enclosing_sphere"] = Field(
+        "vertices", description="centre c of the distance functions: vertex mean, area centroid, or centre of "
+                                "the minimal enclosing sphere")
+    lam: float | None = Field(None, gt=0, lt=1, description="fixed mixture weight lambda; none = data-dependent")
+    euclidean_scale: Literal["mean_squared_radius", "none"] = Field(
+        "mean_squared_radius", description="divide the Euclidean term by its mean (scale invariant) or not (literal)")
+    mass: Literal["full", "voronoi"] = Field("full", description="Fiedler: FEM mass matrix type")
+
+
+@dataclass(frozen=True, eq=False)
+class MorseResult(StageResult):
+    function: MorseFunction
+
+    def summary(self) -> dict:
+        out = {"kind": self.function.kind}
+        out.update({k: v for k, v in self.function.info.items() if np.isscalar(v)})
+        return out
+
+
+def morse_function(mesh: Mesh, params: MorseParams) -> MorseFunction:
+    """Compute the function selected by ``params.function`` on ``mesh``."""
+    if params.function in ("mixture", "euclidean", "affine"):
+        from stages.morse.mixture import mixture_distance
+
+        return mixture_distance(mesh.V, mesh.F, kind=params.function, centroid=params.centroid, lam=params.lam,
+                                euclidean_scale=params.euclidean_scale)
+    if params.function == "height":
+        from stages.morse.height import principal_height
+
+        return principal_height(mesh.V)
+    if params.function == "geodesic":
+        from stages.morse.geodesic import geodesic_from_centroid
+
+        return geodesic_from_centroid(mesh.V, mesh.F, centroid=params.centroid)
+    from stages.spectral.fiedler import fiedler_function
+
+    return fiedler_function(mesh, mass=params.mass)
+
+
+@stage("morse", params=MorseParams, version=1, consumes=("mesh",), produces=("function",))
+def morse(mesh: Mesh, *, params: MorseParams) -> MorseResult:
+    """A Morse function on the vertices (mixture distance, Fiedler vector, height, geodesic)."""
+    return MorseResult(morse_function(mesh, params))
