@@ -26,25 +26,63 @@ def surface_centroid(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return (area[:, None] * P.mean(axis=1)).sum(axis=0) / total
 
 
-def enclosing_sphere_center(V: np.ndarray, *, tol: float = 1e-9, max_iter: int = 10000) -> np.ndarray:
+def _circumcenter(A: np.ndarray) -> np.ndarray:
+    """Centre of the smallest sphere through the 1-4 points A (k, 3) (circumcentre in their affine hull)."""
+    if len(A) == 1:
+        return A[0].copy()
+    D = A[1:] - A[0]
+    G = D @ D.T
+    rhs = 0.5 * np.einsum("ij,ij->i", D, D)
+    coef = np.linalg.lstsq(G, rhs, rcond=None)[0]
+    return A[0] + coef @ D
+
+
+def enclosing_sphere_center(V: np.ndarray, *, seed: int = 0) -> np.ndarray:
     """Centre of the minimal enclosing sphere of the vertices, (3,).
 
-    Bădoiu–Clarkson iteration started from the bounding-box centre: move the
-    centre towards the farthest point by 1/(k+1) of the gap; it converges to the
-    exact centre, with radius error O(1/k). Stops when the step is below ``tol``
-    times the bounding-box diagonal. (No maintained Python package offers this;
-    Welzl's algorithm would be exact but is recursive and slower in numpy.)
+    Welzl's algorithm (1991) in its iterative move-to-front-free form with
+    nested loops (expected linear time in random order) over the convex-hull
+    vertices (``scipy.spatial.ConvexHull``); exact up to rounding, so the centre
+    moves exactly with a rotated, scaled or translated mesh. Written here because
+    no maintained Python package provides it for 3D points.
     """
+    from scipy.spatial import ConvexHull, QhullError
+
     V = np.asarray(V, dtype=np.float64)
-    c = (V.min(axis=0) + V.max(axis=0)) / 2
-    scale = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) or 1.0
-    for k in range(1, max_iter + 1):
-        far = V[np.argmax(((V - c) ** 2).sum(axis=1))]
-        step = (far - c) / (k + 1)
-        c = c + step
-        if np.linalg.norm(step) < tol * scale and k > 50:
-            break
-    return c
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    mid, scale = (lo + hi) / 2, float(np.linalg.norm(hi - lo)) or 1.0
+    P = (V - mid) / scale
+    try:
+        P = P[ConvexHull(P).vertices]
+    except (QhullError, ValueError):  # flat or tiny point sets: use all points
+        pass
+    P = P[np.random.default_rng(seed).permutation(len(P))]
+    eps = 1e-12
+
+    def outside(p, c, r2):
+        return float(((p - c) ** 2).sum()) > r2 * (1 + eps) + eps
+
+    def ball(points):
+        c = _circumcenter(np.asarray(points))
+        return c, float(((points[0] - c) ** 2).sum())
+
+    c, r2 = ball([P[0]])
+    for i in range(1, len(P)):
+        if not outside(P[i], c, r2):
+            continue
+        c, r2 = ball([P[i]])
+        for j in range(i):
+            if not outside(P[j], c, r2):
+                continue
+            c, r2 = ball([P[i], P[j]])
+            for k in range(j):
+                if not outside(P[k], c, r2):
+                    continue
+                c, r2 = ball([P[i], P[j], P[k]])
+                for m in range(k):
+                    if outside(P[m], c, r2):
+                        c, r2 = ball([P[i], P[j], P[k], P[m]])
+    return mid + scale * c
 
 
 CENTROIDS = {

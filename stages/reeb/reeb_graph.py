@@ -161,7 +161,9 @@ def reeb_graph(
     piece_comp = comp_of[:n_pieces]
     used, piece_node = np.unique(piece_comp, return_inverse=True)
     n_nodes = len(used)
-    vertex_node = piece_node[np.searchsorted(used, comp_of[n_pieces:])] if n else np.zeros(0, np.int64)
+    hub_comp = comp_of[n_pieces:]
+    vertex_node = np.minimum(np.searchsorted(used, hub_comp), max(n_nodes - 1, 0))
+    vertex_node[used[vertex_node] != hub_comp] = -1 if n_nodes else 0  # unreferenced vertices: no node
 
     # exact measures of each piece, summed per node
     order = np.argsort(f[F], axis=1, kind="stable")
@@ -199,7 +201,9 @@ def reeb_graph(
     below_node = piece_node[offset[rep_face] + rep_level - 1 - t_lo[rep_face]]
     above_node = piece_node[offset[rep_face] + rep_level - t_lo[rep_face]]
 
-    members = np.split(np.argsort(vertex_node, kind="stable"), np.cumsum(np.bincount(vertex_node, minlength=n_nodes))[:-1])
+    referenced = np.flatnonzero(vertex_node >= 0)
+    by_node = referenced[np.argsort(vertex_node[referenced], kind="stable")]
+    members = np.split(by_node, np.cumsum(np.bincount(vertex_node[referenced], minlength=n_nodes))[:-1])
     G = nx.MultiGraph()
     for i in range(n_nodes):
         G.add_node(i, pos=pos[i], band=int(node_band[i]), value=float(value[i]), area=float(area[i]),
