@@ -187,7 +187,8 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
     """Apply CLI ``--set key=value`` overrides to raw config data.
 
     ``key`` is either a dotted path into the config (``executor.kind``,
-    ``name``) or ``stage.param`` for a stage of the chain (``noise.sigma``).
+    ``name``), ``sweep.stage.param`` for a sweep (value: a list), or
+    ``stage.param`` for a stage of the chain (``noise.sigma``).
     Values are parsed as YAML scalars (``0.01``, ``true``, ``[1, 2]``).
     """
     data = copy.deepcopy(data)
@@ -200,6 +201,9 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
         except yaml.YAMLError as exc:
             raise ConfigError(f"--set {item!r}: value is not valid YAML ({exc})") from None
         parts = key.strip().split(".")
+        if parts[0] == "sweep" and len(parts) == 3:  # sweep keys contain a dot: sweep.<stage>.<param>
+            data.setdefault("sweep", {})[f"{parts[1]}.{parts[2]}"] = value
+            continue
         if parts[0] in RawConfig.model_fields:
             target = data
             for part in parts[:-1]:

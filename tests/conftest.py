@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-BUNDLED_MESHES = REPO_ROOT / "data" / "meshes"
+from tests_paths import BUNDLED_MESHES
 
 
 @pytest.fixture

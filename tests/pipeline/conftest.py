@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 import yaml
 
-REPO = Path(__file__).resolve().parents[2]
-BUNDLED_MESHES = REPO / "data" / "meshes"
+from tests_paths import BUNDLED_MESHES
 
 
 @pytest.fixture

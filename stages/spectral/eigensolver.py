@@ -1,0 +1,673 @@
+"""Smallest generalised eigenpairs ``Q phi = lambda K phi`` of a mesh Laplacian.
+
+``Q`` symmetric positive semidefinite with the constants as its kernel (a connected
+mesh), ``K`` symmetric positive definite (:mod:`stages.spectral.laplacian`). Results
+(:class:`Eigenpairs`) follow one convention whatever the method:
+
+- ``values`` ascending, ``values[0] = 0`` exactly and ``vectors[:, 0]`` the exact
+  constant ``1 / sqrt(area)`` (the constant is deflated analytically, never computed);
+- vectors K-orthonormal: ``vectors.T @ K @ vectors = I`` (to round-off);
+- the sign of every non-constant vector fixed by the sign rule (below).
+
+Methods
+-------
+``shift_invert`` (the default for n > 400)
+    Factor ``S = Q - sigma K`` once, with ``sigma < 0`` slightly negative (``S`` is then
+    SPD: no pivoting, and the kernel of ``Q`` does not make it singular), by a sparse
+    LDL^T (qdldl, AMD ordering) or SuperLU (MMD on A^T + A) when qdldl is missing. Then a
+    block Krylov–Rayleigh–Ritz iteration with the operator ``W = S^{-1} K`` (a
+    Davidson/Lanczos hybrid, full K-orthogonalisation, locking of converged pairs, thick
+    restarts): each step adds ``W x`` for the unconverged wanted Ritz vectors ``x``.
+    The start block is built from the principal-axis coordinates of the vertices when
+    ``V`` is given (the Fiedler vector follows the elongation of the shape, so this is
+    already a good guess) plus a small seeded random part, so that no eigenvector is
+    missed by symmetry. If it does not converge, ARPACK (``scipy.sparse.linalg.eigsh``,
+    mode 3) is run with the same factorisation.
+``lobpcg``
+    ``scipy.sparse.linalg.lobpcg`` preconditioned by one V-cycle of a pyamg
+    smoothed-aggregation hierarchy of ``S``, the constant as a constraint. No
+    factorisation: O(nnz) memory, for meshes too large to factor.
+``multilevel``
+    Decimate the mesh (fast-simplification, ``coarse_vertices``), solve the coarse
+    problem exactly (``shift_invert``), prolong the coarse eigenvectors to the fine mesh
+    by barycentric interpolation on the closest coarse triangle, and refine on the fine
+    mesh with LOBPCG + AMG. Needs ``V`` and ``F``.
+``dense``
+    ``scipy.linalg.eigh`` on dense matrices (n <= ``DENSE_MAX``).
+``auto``
+    ``dense`` for n <= 400, else ``shift_invert``; on failure (factorisation error, no
+    convergence) falls back to ``lobpcg`` and, for n <= ``DENSE_MAX``, to ``dense``.
+
+An explicit method also falls back along that chain unless ``fallback=False``; the
+result names the method that succeeded and the failed attempts. See
+``docs/spectral.md`` for the measurements behind these choices.
+
+Convergence
+-----------
+A pair ``(theta, x)`` with ``x^T K x = 1`` has converged when the relative residual
+``||Q x - theta K x||_{D^-1} / theta <= tol``, with ``D`` the lumped mass (row sums of
+``K``). This quantity is invariant under rigid motions and uniform scaling. The
+eigenvalue error is then about ``tol^2 * theta / relative gap`` (1e-12 relative for the
+default ``tol = 1e-6``) and the eigenvector error about ``tol / relative gap``.
+
+Sign rule
+---------
+``'skewness'`` (default): each non-constant ``phi`` is oriented so that its K-weighted
+third moment ``sum_i d_i phi_i^3`` (``d`` = lumped mass, a quadrature of the integral of
+``phi^3`` over the surface) is positive: the long tail of the distribution of ``phi`` points
+to positive values. It depends only on the intrinsic geometry, so it is invariant under
+rotations, translations and uniform scaling (``phi -> phi / s``, ``d -> s^2 d``). When the
+dimensionless skewness ``|gamma| < 1e-6`` (a shape with a symmetry that maps ``phi`` to
+``-phi``, e.g. a sphere, a torus, a symmetric dumbbell) no intrinsic rule can decide, and
+the rule falls back to ``'max_abs'``, which is then decided by round-off: the reported
+``skewness`` tells how reliable the sign is. ``'max_abs'``: the entry of largest magnitude
+is positive.
+
+Degenerate eigenvalues (``lambda2 ~ lambda3``, e.g. shapes with rotational symmetry) make
+``phi2`` itself arbitrary within the eigenspace; the relative gap
+``(lambda3 - lambda2) / lambda2`` (see :func:`relative_gap`) reports it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Literal
+
+import numpy as np
+import scipy.linalg as la
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+
+from pipeline.errors import StageError
+
+Method = Literal["auto", "shift_invert", "multilevel", "lobpcg", "dense"]
+SignRule = Literal["skewness", "max_abs"]
+
+#: Largest n for the dense method (and the dense fallback).
+DENSE_MAX = 3000
+#: ``auto`` uses the dense method up to this n.
+AUTO_DENSE_MAX = 400
+#: Dimensionless skewness below which the 'skewness' sign rule defers to 'max_abs'.
+SKEWNESS_TIE = 1e-6
+
+
+@dataclass(frozen=True, eq=False)
+class Eigenpairs:
+    """The k smallest eigenpairs of ``Q phi = lambda K phi``.
+
+    Attributes
+    ----------
+    values : (k,) float64
+        Ascending; ``values[0] = 0``.
+    vectors : (n, k) float64
+        K-orthonormal; column 0 is the constant ``1 / sqrt(area)``; signs fixed by ``sign_rule``.
+    method : str
+        The method that produced them ('shift_invert', 'arpack', 'lobpcg', 'multilevel', 'dense').
+    iterations : int
+        Outer iterations of that method (block steps, LOBPCG iterations, ARPACK restarts).
+    n_solves : int
+        Applications of the inverse or of the preconditioner to one vector.
+    residuals : (k,) float64
+        Relative residuals ``||Q x - lambda K x||_{D^-1} / lambda`` (0 for the constant).
+    skewness : (k,) float64
+        Dimensionless K-weighted skewness of each vector after the sign rule (0 for the constant).
+    shift : float
+        The shift sigma (< 0) of ``Q - sigma K`` (0 for the dense method).
+    sign_rule : str
+        The sign rule applied.
+    attempts : tuple of str
+        Failed attempts before ``method``, as ``"method: reason"``.
+    seconds : float
+        Wall time of :func:`smallest_eigenpairs`.
+    """
+
+    values: np.ndarray
+    vectors: np.ndarray
+    method: str
+    iterations: int
+    n_solves: int
+    residuals: np.ndarray
+    skewness: np.ndarray
+    shift: float
+    sign_rule: str
+    attempts: tuple[str, ...] = field(default_factory=tuple)
+    seconds: float = 0.0
+
+    @property
+    def k(self) -> int:
+        return int(self.values.shape[0])
+
+    @property
+    def fiedler(self) -> np.ndarray:
+        """``phi2``, (n,) float64."""
+        return self.vectors[:, 1]
+
+
+def relative_gap(values: np.ndarray) -> float:
+    """``(lambda3 - lambda2) / lambda2`` (inf when fewer than three values)."""
+    if len(values) < 3 or values[1] <= 0:
+        return float("inf")
+    return float((values[2] - values[1]) / values[1])
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+class _Problem:
+    """``Q``, ``K`` and the quantities every method needs (lumped mass, exact constant)."""
+
+    def __init__(self, Q: sp.spmatrix, K: sp.spmatrix):
+        self.Q = sp.csr_matrix(Q, dtype=np.float64)
+        self.K = sp.csr_matrix(K, dtype=np.float64)
+        self.n = self.Q.shape[0]
+        self.d = np.asarray(self.K.sum(axis=1)).ravel()
+        self.area = float(self.d.sum())
+        self.c = np.full(self.n, 1.0 / np.sqrt(self.area))  # K-normalised constant
+        self.Kc = self.d / np.sqrt(self.area)  # K @ c
+
+    def deflate(self, X: np.ndarray) -> np.ndarray:
+        """``X`` minus its K-projection on the constant."""
+        return X - np.outer(self.c, self.Kc @ X)
+
+    def residuals(self, X: np.ndarray, theta: np.ndarray, QX: np.ndarray | None = None,
+                  KX: np.ndarray | None = None) -> np.ndarray:
+        """Relative residuals ``||Q x - theta K x||_{D^-1} / theta`` of the columns of ``X``."""
+        QX = self.Q @ X if QX is None else QX
+        KX = self.K @ X if KX is None else KX
+        R = QX - KX * theta
+        return np.sqrt(np.einsum("ij,ij->j", R, R / self.d[:, None])) / np.abs(theta)
+
+    def k_orthonormalize(self, X: np.ndarray) -> np.ndarray:
+        """K-orthonormal basis of span(X) deflated of the constant (columns may be dropped)."""
+        X = self.deflate(X)
+        G = X.T @ (self.K @ X)
+        w, U = np.linalg.eigh((G + G.T) / 2)
+        keep = w > 1e-12 * max(w.max(), 0.0)
+        return X @ (U[:, keep] / np.sqrt(w[keep]))
+
+
+def _start_block(prob: _Problem, p: int, V: np.ndarray | None, seed: int) -> np.ndarray:
+    """A start block (n, p): principal-axis coordinates of ``V`` (and their products) plus 5% noise.
+
+    Without ``V``, seeded Gaussian vectors. The noise keeps every eigenvector present in
+    the start (a symmetric mesh could otherwise hide the Fiedler vector from coordinate
+    functions that are all odd under the symmetry).
+    """
+    rng = np.random.default_rng(seed)
+    noise = rng.standard_normal((prob.n, p))
+    if V is None:
+        return noise
+    V = np.asarray(V, dtype=np.float64)
+    w = prob.d / prob.area
+    X = V - w @ V
+    C = (X * w[:, None]).T @ X
+    _, R = np.linalg.eigh(C)
+    X = X @ R[:, ::-1]
+    cols = [X[:, 0], X[:, 1], X[:, 2], X[:, 0] ** 2, X[:, 0] * X[:, 1], X[:, 1] ** 2, X[:, 2] ** 2,
+            X[:, 0] * X[:, 2], X[:, 1] * X[:, 2]]
+    B = np.column_stack([cols[j % len(cols)] for j in range(p)])
+    scale = np.sqrt(np.einsum("ij,ij,i->j", B, B, w)) + 1e-300
+    return B / scale + 0.05 * noise
+
+
+def _rayleigh_estimate(prob: _Problem, X: np.ndarray) -> float:
+    """Smallest Rayleigh quotient among the (deflated) columns of ``X``: an upper bound of lambda2."""
+    X = prob.deflate(X)
+    num = np.einsum("ij,ij->j", X, prob.Q @ X)
+    den = np.einsum("ij,ij->j", X, prob.K @ X)
+    ok = den > 0
+    return float(np.min(num[ok] / den[ok])) if ok.any() else 1.0
+
+
+def _auto_shift(prob: _Problem, V: np.ndarray | None) -> float:
+    """sigma = -0.01 * (Rayleigh quotient of the principal-axis coordinate), an upper bound of lambda2.
+
+    Without ``V``: ``-1e-8 * median(diag Q / diag K)`` (``diag Q / diag K`` ~ lambda_max ~ n lambda2
+    on a surface mesh).
+    """
+    if V is not None:
+        est = _rayleigh_estimate(prob, _start_block(prob, 1, V, seed=0))
+        if np.isfinite(est) and est > 0:
+            return -0.01 * est
+    ratio = np.median(prob.Q.diagonal() / prob.K.diagonal())
+    return -1e-8 * float(ratio) if ratio > 0 else -1e-8
+
+
+class ShiftInvert:
+    """A factorisation of ``S = Q - sigma K`` (sigma < 0, so S is SPD), solve many times.
+
+    Uses qdldl (sparse LDL^T, AMD ordering) when installed, else SuperLU with the
+    MMD(A^T + A) ordering and no pivoting (S is SPD).
+
+    Parameters
+    ----------
+    Q, K : (n, n) sparse
+        Stiffness and mass matrices.
+    sigma : float
+        The shift, < 0.
+    backend : {'auto', 'qdldl', 'superlu'}
+        Factorisation library.
+    """
+
+    def __init__(self, Q: sp.spmatrix, K: sp.spmatrix, sigma: float, backend: str = "auto"):
+        if not sigma < 0:
+            raise ValueError(f"sigma must be negative, got {sigma}")
+        self.sigma = float(sigma)
+        S = (sp.csr_matrix(Q) - self.sigma * sp.csr_matrix(K)).tocsc()
+        self.n = S.shape[0]
+        self.backend = backend
+        if backend in ("auto", "qdldl"):
+            try:
+                import qdldl
+
+                self._qdldl = qdldl.Solver(S)
+                self.backend = "qdldl"
+                return
+            except ImportError:
+                if backend == "qdldl":
+                    raise
+        self._lu = sla.splu(S, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                            options={"SymmetricMode": True})
+        self.backend = "superlu"
+
+    def solve(self, B: np.ndarray) -> np.ndarray:
+        """``S^{-1} B`` for B (n,) or (n, p)."""
+        if self.backend == "superlu":
+            return self._lu.solve(np.asarray(B, dtype=np.float64))
+        if B.ndim == 1:
+            return self._qdldl.solve(np.ascontiguousarray(B, dtype=np.float64))
+        out = np.empty(B.shape)
+        for j in range(B.shape[1]):
+            out[:, j] = self._qdldl.solve(np.ascontiguousarray(B[:, j], dtype=np.float64))
+        return out
+
+
+# --------------------------------------------------------------------------- methods
+
+
+@dataclass
+class _Raw:
+    """Unnormalised output of a method: the nev non-constant pairs."""
+
+    values: np.ndarray
+    vectors: np.ndarray
+    iterations: int
+    n_solves: int
+    shift: float
+
+
+class _NotConverged(Exception):
+    pass
+
+
+def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0: np.ndarray, nev: int,
+                  tol: float, maxiter: int, max_basis: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """Block Krylov–Rayleigh–Ritz with ``W = S^{-1} K``, locking and thick restarts.
+
+    Returns the nev smallest Ritz values, their K-normalised Ritz vectors, the number of
+    block steps and of single-vector solves. Raises :class:`_NotConverged`.
+    """
+    n = prob.n
+    Z = np.empty((n, max_basis))
+    QZ = np.empty((n, max_basis))
+    KZ = np.empty((n, max_basis))
+    H = np.zeros((max_basis, max_basis))
+    m = 0
+    B = X0
+    n_solves = 0
+    res = np.full(nev, np.inf)
+    for step in range(1, maxiter + 1):
+        # K-orthogonalise the new block against the basis (twice) and the constant, then within itself
+        B = prob.deflate(B)
+        for _ in range(2):
+            if m:
+                B = B - Z[:, :m] @ (KZ[:, :m].T @ B)
+        B = prob.k_orthonormalize(B)
+        b = B.shape[1]
+        if b == 0:
+            raise _NotConverged("the Krylov space stopped growing (breakdown)")
+        if m + b > max_basis:  # thick restart on the current Ritz vectors
+            keep = min(m, max(2 * nev, max_basis // 2))
+            _, S = np.linalg.eigh(H[:m, :m])
+            S = S[:, :keep]
+            Z[:, :keep] = Z[:, :m] @ S
+            QZ[:, :keep] = QZ[:, :m] @ S
+            KZ[:, :keep] = KZ[:, :m] @ S
+            H[:keep, :keep] = S.T @ H[:m, :m] @ S
+            H[:keep, keep:] = 0
+            H[keep:, :keep] = 0
+            m = keep
+            B = B - Z[:, :m] @ (KZ[:, :m].T @ B)
+            B = prob.k_orthonormalize(B)
+            b = min(B.shape[1], max_basis - m)
+            B = B[:, :b]
+        QB = prob.Q @ B
+        Z[:, m:m + b] = B
+        QZ[:, m:m + b] = QB
+        KZ[:, m:m + b] = prob.K @ B
+        Hn = Z[:, :m + b].T @ QB
+        H[:m + b, m:m + b] = Hn
+        H[m:m + b, :m + b] = Hn.T
+        m += b
+        H[:m, :m] = (H[:m, :m] + H[:m, :m].T) / 2
+        r = min(nev, m)
+        theta, S = la.eigh(H[:m, :m], subset_by_index=[0, min(m, nev + 1) - 1])
+        theta, S = theta[:r], S[:, :r]
+        QX = QZ[:, :m] @ S
+        KX = KZ[:, :m] @ S
+        res = prob.residuals(None, theta, QX=QX, KX=KX) if r else res
+        if r == nev and np.all(res <= tol):
+            return theta, Z[:, :m] @ S, step, n_solves
+        # expand with W x for the unconverged wanted Ritz vectors (all of them before r == nev)
+        todo = np.flatnonzero(res > tol) if r == nev else np.arange(r)
+        B = solve(KX[:, todo])
+        n_solves += len(todo)
+    raise _NotConverged(f"no convergence in {maxiter} block steps (residuals {np.array2string(res, precision=2)}, "
+                        f"tol {tol:g})")
+
+
+def _shift_invert(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray | None, seed: int,
+                  sigma: float | None, backend: str, X0: np.ndarray | None = None) -> _Raw:
+    sigma = _auto_shift(prob, V) if sigma is None else float(sigma)
+    try:
+        fac = ShiftInvert(prob.Q, prob.K, sigma, backend=backend)
+    except (RuntimeError, ValueError) as exc:  # singular factor, ...
+        raise _NotConverged(f"factorisation of Q - sigma K failed ({exc})") from None
+    p = nev + 1  # one guard vector speeds up the last wanted pair
+    if X0 is None:
+        X0 = _start_block(prob, p, V, seed)
+    max_basis = int(min(prob.n - 1, max(12 * p, 40)))
+    try:
+        values, vectors, steps, n_solves = _block_krylov(prob, fac.solve, X0, nev, tol, maxiter, max_basis)
+        return _Raw(values, vectors, steps, n_solves, sigma)
+    except _NotConverged as first:
+        arpack = _arpack(prob, fac, nev, tol, V, seed)
+        if arpack is None:
+            raise first
+        return arpack
+
+
+def _arpack(prob: _Problem, fac: ShiftInvert, nev: int, tol: float, V, seed: int) -> _Raw | None:
+    """ARPACK (mode 3) with the same factorisation; the constant is among its k = nev + 1 pairs."""
+    count = [0]
+
+    def opinv(b):
+        count[0] += 1
+        return fac.solve(b)
+
+    op = sla.LinearOperator((prob.n, prob.n), matvec=opinv, dtype=np.float64)
+    v0 = prob.deflate(_start_block(prob, 1, V, seed))[:, 0]
+    try:
+        w, X = sla.eigsh(prob.Q, k=nev + 1, M=prob.K, sigma=fac.sigma, OPinv=op, which="LM", v0=v0,
+                         tol=tol * 1e-3, maxiter=2000)
+    except (sla.ArpackNoConvergence, sla.ArpackError):
+        return None
+    order = np.argsort(w)
+    w, X = w[order][1:], X[:, order][:, 1:]
+    X = prob.deflate(X)
+    X = X / np.sqrt(np.einsum("ij,ij->j", X, prob.K @ X))
+    if np.any(prob.residuals(X, w) > 10 * tol):
+        return None
+    return _Raw(w, X, 0, count[0], fac.sigma)
+
+
+def _amg_preconditioner(prob: _Problem, sigma: float) -> sla.LinearOperator:
+    import pyamg
+
+    S = (prob.Q - sigma * prob.K).tocsr()
+    ml = pyamg.smoothed_aggregation_solver(S, B=np.ones((prob.n, 1)), max_coarse=300)
+    return ml.aspreconditioner(cycle="V")
+
+
+def _lobpcg(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray | None, seed: int,
+            sigma: float | None, X0: np.ndarray | None = None) -> _Raw:
+    import warnings
+
+    sigma = _auto_shift(prob, V) if sigma is None else float(sigma)
+    M = _amg_preconditioner(prob, sigma)
+    count = [0]
+
+    def precond(X):
+        count[0] += X.shape[1] if X.ndim == 2 else 1
+        return M @ X
+
+    Mop = sla.LinearOperator((prob.n, prob.n), matvec=precond, matmat=precond, dtype=np.float64)
+    p = nev + 1
+    X = _start_block(prob, p, V, seed) if X0 is None else X0
+    X = prob.k_orthonormalize(X)
+    if X.shape[1] < p:
+        X = np.column_stack([X, np.random.default_rng(seed).standard_normal((prob.n, p - X.shape[1]))])
+    est = abs(sigma) * 100.0
+    # lobpcg measures ||r||_2; ||r||_{D^-1} <= ||r||_2 / sqrt(min d): aim below our tol
+    tol2 = tol * est * np.sqrt(prob.d.min()) * 0.1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        w, Xv, hist = sla.lobpcg(prob.Q, X, B=prob.K, M=Mop, Y=prob.c[:, None], tol=tol2, maxiter=maxiter,
+                                 largest=False, retResidualNormsHistory=True)
+    order = np.argsort(w)[:nev]
+    w, Xv = w[order], Xv[:, order]
+    Xv = prob.deflate(Xv)
+    Xv = Xv / np.sqrt(np.einsum("ij,ij->j", Xv, prob.K @ Xv))
+    res = prob.residuals(Xv, w)
+    if not np.all(res <= 10 * tol):
+        raise _NotConverged(f"LOBPCG stopped after {len(hist)} iterations with residuals "
+                            f"{np.array2string(res, precision=2)} (tol {tol:g})")
+    return _Raw(w, Xv, len(hist), count[0], sigma)
+
+
+def _barycentric_prolongation(V: np.ndarray, Vc: np.ndarray, Fc: np.ndarray) -> sp.csr_matrix:
+    """(n, nc) interpolation: each fine vertex from the closest point on the coarse mesh (barycentric)."""
+    import igl
+
+    _, I, C = igl.point_mesh_squared_distance(V, Vc, Fc)
+    I = np.asarray(I, dtype=np.int64).ravel()
+    T = Fc[I]
+    A, B, Cc = Vc[T[:, 0]], Vc[T[:, 1]], Vc[T[:, 2]]
+    L = np.asarray(igl.barycentric_coordinates(np.ascontiguousarray(C), np.ascontiguousarray(A),
+                                               np.ascontiguousarray(B), np.ascontiguousarray(Cc)))
+    L = np.clip(np.nan_to_num(L, nan=1.0 / 3.0), 0.0, None)
+    L /= L.sum(axis=1, keepdims=True)
+    n = V.shape[0]
+    rows = np.repeat(np.arange(n), 3)
+    return sp.csr_matrix((L.ravel(), (rows, T.ravel())), shape=(n, Vc.shape[0]))
+
+
+def _multilevel(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray | None,
+                F: np.ndarray | None, seed: int, sigma: float | None, coarse_vertices: int,
+                backend: str) -> _Raw:
+    if V is None or F is None:
+        raise _NotConverged("the multilevel method needs the mesh (V and F)")
+    from stages.mesh.decimate import simplify_to_target
+    from stages.spectral.laplacian import _assemble, _components, _double_areas_and_sq_lengths
+
+    if prob.n <= 2 * coarse_vertices:
+        raise _NotConverged(f"mesh too small for multilevel ({prob.n} <= 2 x {coarse_vertices} vertices)")
+    Vc, Fc, _ = simplify_to_target(V, F, 2 * coarse_vertices)
+    s, dbl = _double_areas_and_sq_lengths(Vc, Fc)
+    keep = dbl > 0
+    Fc = Fc[keep]
+    Qc, Kc = _assemble(Vc.shape[0], Fc, s[keep], dbl[keep])
+    if _components(Qc)[0] != 1 or not np.all(Kc.diagonal() > 0):
+        raise _NotConverged("the decimated mesh is disconnected or degenerate")
+    coarse = _Problem(Qc, Kc)
+    p = nev + 1
+    raw = _shift_invert(coarse, p, tol=1e-4, maxiter=maxiter, V=Vc, seed=seed, sigma=None, backend=backend)
+    P = _barycentric_prolongation(V, Vc, Fc)
+    X0 = P @ raw.vectors
+    fine = _lobpcg(prob, nev, tol=tol, maxiter=maxiter, V=V, seed=seed, sigma=sigma, X0=X0)
+    return _Raw(fine.values, fine.vectors, fine.iterations, fine.n_solves + raw.n_solves, fine.shift)
+
+
+def _dense(prob: _Problem, nev: int) -> _Raw:
+    if prob.n > DENSE_MAX:
+        raise _NotConverged(f"n = {prob.n} is above the dense limit {DENSE_MAX}")
+    Qd, Kd = prob.Q.toarray(), prob.K.toarray()
+    w, X = la.eigh(Qd, Kd, subset_by_index=[0, nev])
+    X = prob.deflate(X[:, 1:])
+    X = prob.k_orthonormalize(X)
+    # k_orthonormalize may rotate within the block: Rayleigh–Ritz back to eigenvectors
+    H = X.T @ (prob.Q @ X)
+    w, S = np.linalg.eigh((H + H.T) / 2)
+    return _Raw(w, X @ S, 1, 0, 0.0)
+
+
+# --------------------------------------------------------------------------- sign rule
+
+
+def skewness(vectors: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """Dimensionless K-weighted skewness ``sum d phi^3 sqrt(sum d) / (sum d phi^2)^(3/2)`` per column."""
+    vectors = np.asarray(vectors, dtype=np.float64)
+    if vectors.ndim == 1:
+        vectors = vectors[:, None]
+    m2 = d @ vectors**2
+    m3 = d @ vectors**3
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = m3 * np.sqrt(d.sum()) / m2**1.5
+    return np.nan_to_num(g)
+
+
+def fix_signs(vectors: np.ndarray, d: np.ndarray, rule: SignRule = "skewness") -> np.ndarray:
+    """Orient each column of ``vectors`` (n, k) by ``rule`` (see the module docstring); returns a copy."""
+    if rule not in ("skewness", "max_abs"):
+        raise ValueError(f"sign rule must be 'skewness' or 'max_abs', got {rule!r}")
+    X = np.array(vectors, dtype=np.float64, copy=True)
+    g = skewness(X, d)
+    for j in range(X.shape[1]):
+        if rule == "skewness" and abs(g[j]) >= SKEWNESS_TIE:
+            flip = g[j] < 0
+        else:
+            flip = X[np.argmax(np.abs(X[:, j])), j] < 0
+        if flip:
+            X[:, j] = -X[:, j]
+    return X
+
+
+# --------------------------------------------------------------------------- public entry
+
+
+def _chain(method: str, n: int, fallback: bool) -> list[str]:
+    if method == "auto":
+        chain = ["dense"] if n <= AUTO_DENSE_MAX else ["shift_invert", "lobpcg"]
+    else:
+        chain = [method]
+        if fallback:
+            chain += [m for m in ("shift_invert", "lobpcg") if m != method]
+    if fallback or method == "auto":
+        if n <= DENSE_MAX and "dense" not in chain:
+            chain.append("dense")
+    return chain
+
+
+def smallest_eigenpairs(
+    Q: sp.spmatrix,
+    K: sp.spmatrix,
+    k: int = 3,
+    *,
+    method: Method = "auto",
+    tol: float = 1e-6,
+    maxiter: int = 200,
+    V: np.ndarray | None = None,
+    F: np.ndarray | None = None,
+    sign_rule: SignRule = "skewness",
+    sigma: float | None = None,
+    seed: int = 0,
+    coarse_vertices: int = 3000,
+    backend: Literal["auto", "qdldl", "superlu"] = "auto",
+    fallback: bool = True,
+) -> Eigenpairs:
+    """The ``k`` smallest eigenpairs of ``Q phi = lambda K phi`` (constant included).
+
+    Parameters
+    ----------
+    Q : (n, n) sparse, symmetric PSD
+        Stiffness matrix whose kernel is the constants (a connected mesh).
+    K : (n, n) sparse, symmetric PD
+        Mass matrix.
+    k : int
+        Number of pairs, 2 <= k < n, the constant pair included (k = 3: phi1, phi2, phi3).
+    method : {'auto', 'shift_invert', 'multilevel', 'lobpcg', 'dense'}
+        See the module docstring.
+    tol : float
+        Relative residual at which a pair has converged (module docstring).
+    maxiter : int
+        Outer iterations per method.
+    V, F : arrays, optional
+        The mesh: V (n, 3) improves the start block and the shift; ``multilevel`` needs both.
+    sign_rule : {'skewness', 'max_abs'}
+        How the sign of each non-constant vector is fixed.
+    sigma : float, optional
+        Shift (< 0) of ``Q - sigma K``; default from a Rayleigh quotient (module docstring).
+    seed : int
+        Seed of the random part of the start block.
+    coarse_vertices : int
+        Target vertex count of the coarse mesh (``multilevel``).
+    backend : {'auto', 'qdldl', 'superlu'}
+        Sparse factorisation for ``shift_invert``.
+    fallback : bool
+        On failure, try the other methods (module docstring).
+
+    Returns
+    -------
+    Eigenpairs
+
+    Raises
+    ------
+    ValueError
+        Bad shapes or arguments.
+    StageError
+        Every method failed, or lambda2 is 0 (a disconnected mesh).
+    """
+    start = time.perf_counter()
+    if Q.shape != K.shape or Q.ndim != 2 or Q.shape[0] != Q.shape[1]:
+        raise ValueError(f"Q and K must be square and of the same shape, got {Q.shape} and {K.shape}")
+    n = Q.shape[0]
+    if not 2 <= k < n:
+        raise ValueError(f"k must satisfy 2 <= k < n = {n}, got {k}")
+    if method not in ("auto", "shift_invert", "multilevel", "lobpcg", "dense"):
+        raise ValueError(f"unknown method {method!r}")
+    if not tol > 0:
+        raise ValueError(f"tol must be positive, got {tol}")
+    if V is not None and np.shape(V) != (n, 3):
+        raise ValueError(f"V must have shape ({n}, 3), got {np.shape(V)}")
+    prob = _Problem(Q, K)
+    if not np.all(prob.d > 0):
+        raise ValueError("K has non-positive row sums: it is not a mass matrix of a mesh without isolated vertices")
+    nev = k - 1
+    attempts: list[str] = []
+    raw: _Raw | None = None
+    used = ""
+    for m in _chain(method, n, fallback):
+        try:
+            if m == "shift_invert":
+                raw = _shift_invert(prob, nev, tol=tol, maxiter=maxiter, V=V, seed=seed, sigma=sigma,
+                                    backend=backend)
+                if raw.iterations == 0:
+                    m = "arpack"
+            elif m == "lobpcg":
+                raw = _lobpcg(prob, nev, tol=tol, maxiter=maxiter, V=V, seed=seed, sigma=sigma)
+            elif m == "multilevel":
+                raw = _multilevel(prob, nev, tol=tol, maxiter=maxiter, V=V, F=F, seed=seed, sigma=sigma,
+                                  coarse_vertices=coarse_vertices, backend=backend)
+            else:
+                raw = _dense(prob, nev)
+            used = m
+            break
+        except (_NotConverged, np.linalg.LinAlgError, RuntimeError, ImportError) as exc:
+            attempts.append(f"{m}: {exc}")
+    if raw is None:
+        raise StageError("no eigensolver converged: " + "; ".join(attempts))
+    order = np.argsort(raw.values)
+    values, vectors = raw.values[order], raw.vectors[:, order]
+    scale = max(abs(values[-1]), 1e-300)
+    if values[0] <= 1e-8 * scale:
+        raise StageError(f"lambda2 = {values[0]:.3g} is 0 up to round-off: the mesh is disconnected (one zero "
+                         "eigenvalue per component); keep one component with `clean: {components: largest}`")
+    vectors = fix_signs(vectors, prob.d, sign_rule)
+    all_values = np.concatenate([[0.0], values])
+    all_vectors = np.column_stack([prob.c, vectors])
+    residuals = np.concatenate([[0.0], prob.residuals(vectors, values)])
+    skews = np.concatenate([[0.0], skewness(vectors, prob.d)])
+    return Eigenpairs(values=all_values, vectors=all_vectors, method=used, iterations=raw.iterations,
+                      n_solves=raw.n_solves, residuals=residuals, skewness=skews, shift=raw.shift,
+                      sign_rule=sign_rule, attempts=tuple(attempts), seconds=time.perf_counter() - start)
