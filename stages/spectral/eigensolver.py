@@ -309,9 +309,10 @@ def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0:
     block steps and of single-vector solves. Raises :class:`_NotConverged`.
     """
     n = prob.n
-    Z = np.empty((n, max_basis))
-    QZ = np.empty((n, max_basis))
-    KZ = np.empty((n, max_basis))
+    # column-major, so that the leading columns Z[:, :m] are one contiguous block for BLAS
+    Z = np.empty((n, max_basis), order="F")
+    QZ = np.empty((n, max_basis), order="F")
+    KZ = np.empty((n, max_basis), order="F")
     H = np.zeros((max_basis, max_basis))
     m = 0
     B = X0
