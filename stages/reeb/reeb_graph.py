@@ -81,23 +81,29 @@ class ReebGraph:
         return self.graph.number_of_edges()
 
 
-def _edge_face_pairs(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
-    """Pairs of faces sharing an edge: (face1, face2, u, w, closed_manifold).
+def _half_edges(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(u, w, face) of the 3 m directed half-edges u -> w of the triangles."""
+    return F.ravel(), F[:, [1, 2, 0]].ravel(), np.repeat(np.arange(len(F)), 3)
 
-    Faces around a non-manifold edge are chained (f1-f2, f2-f3, ...);
-    ``closed_manifold`` is True when every edge has exactly two faces.
-    """
-    m = len(F)
-    u = F[:, [0, 1, 2]].ravel()
-    w = F[:, [1, 2, 0]].ravel()
-    face = np.repeat(np.arange(m), 3)
+
+def is_closed_manifold(F: np.ndarray) -> bool:
+    """True when every edge has exactly two faces (a closed, edge-manifold surface)."""
+    u, w, _ = _half_edges(F)
+    key = np.sort(np.minimum(u, w) * (int(F.max()) + 1) + np.maximum(u, w))
+    same = key[1:] == key[:-1]
+    return bool(len(key) % 2 == 0 and np.all(same[0::2]) and not np.any(same[1::2]))
+
+
+def _face_pairs(u, w, face, n_vertices: int):
+    """Pairs of faces sharing an edge among the given half-edges: (face1, face2, u, w).
+
+    Faces around a non-manifold edge are chained (f1-f2, f2-f3, ...)."""
     lo, hi = np.minimum(u, w), np.maximum(u, w)
-    key = lo * (int(F.max()) + 1) + hi
+    key = lo * n_vertices + hi
     order = np.argsort(key, kind="stable")
     key, face, lo, hi = key[order], face[order], lo[order], hi[order]
     same = key[1:] == key[:-1]
-    closed_manifold = bool(len(key) % 2 == 0 and np.all(same[0::2]) and not np.any(same[1::2]))
-    return face[:-1][same], face[1:][same], lo[:-1][same], hi[:-1][same], closed_manifold
+    return face[:-1][same], face[1:][same], lo[:-1][same], hi[:-1][same]
 
 
 def _expand(start: np.ndarray, stop: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -115,75 +121,111 @@ def _components(n: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 @dataclass
 class _Partition:
-    """Band components of the pieces and the contours between them (internal)."""
+    """Band components and the contours between them (internal).
 
-    piece_face: np.ndarray   # (p,) triangle of each piece
-    piece_band: np.ndarray   # (p,) band of each piece
-    piece_node: np.ndarray   # (p,) node of each piece
+    Pieces (triangle, band) are not stored: a piece that contains a vertex belongs
+    to that vertex's node; the rare pieces without a vertex (a band thinner than a
+    triangle) are the "extra" pieces. ``node_of(face, band)`` maps pieces to nodes.
+    """
+
+    vb: np.ndarray           # (n,) band of each vertex
+    t_lo: np.ndarray         # (m,) lowest and highest band of each triangle
+    t_hi: np.ndarray
     vertex_node: np.ndarray  # (n,) node of each vertex, -1 when unreferenced
     node_band: np.ndarray    # (k,)
-    below_node: np.ndarray   # (c,) per contour component: node below and above, and the level index
+    node_of: object          # callable (face, band) -> node
+    below_node: np.ndarray   # (c,) per contour component: node below, node above, level index
     above_node: np.ndarray
     contour_level: np.ndarray
     genus: np.ndarray | None  # (k,) genus of each band component (closed manifold meshes only)
 
 
-def _partition(F: np.ndarray, f: np.ndarray, levels: np.ndarray, pairs) -> _Partition:
+def _partition(F: np.ndarray, f: np.ndarray, levels: np.ndarray, closed: bool) -> _Partition:
     n, m = len(f), len(F)
-    f1, f2, eu, ew, closed = pairs
+    n_bands = len(levels) - 1
     vb = band_index(f, levels)
     tb = vb[F]
-    t_lo, t_hi = tb.min(axis=1), tb.max(axis=1)
-    span = t_hi - t_lo + 1
-    offset = np.cumsum(span) - span
+    b0, b2 = tb.min(axis=1), tb.max(axis=1)
+    b1 = tb.sum(axis=1) - b0 - b2  # the middle band
+    # extra pieces: bands strictly between the sorted vertex bands of a triangle
+    r1, k1 = _expand(b0 + 1, b1 - 1)
+    r2, k2 = _expand(b1 + 1, b2 - 1)
+    x_face, x_band = np.concatenate([r1, r2]), np.concatenate([k1, k2])
+    x_key = x_face * (n_bands + 1) + x_band
+    order = np.argsort(x_key, kind="stable")
+    x_face, x_band, x_key = x_face[order], x_band[order], x_key[order]
 
-    def piece(face, band):
-        return offset[face] + band - t_lo[face]
+    def piece_id(face, band):
+        """Graph id of the piece (face, band): one of its vertices, or n + extra index."""
+        Ff = F[face]
+        match = vb[Ff] == band[:, None]
+        vert = Ff[np.arange(len(face)), match.argmax(axis=1)]
+        extra = n + np.searchsorted(x_key, face * (n_bands + 1) + band)
+        return np.where(match.any(axis=1), vert, extra)
 
-    piece_face, piece_band = _expand(t_lo, t_hi)
-    n_pieces = len(piece_face)
-    # same-band connectivity: shared edges meeting the band, and shared vertices in the band
+    # connectivity: edges inside one band, and extra pieces across edges spanning 3+ bands. A triangle
+    # inside one band needs only two of its edges; half-edges across bands come from crossing triangles.
+    whole = b0 == b2
+    Fw = F[whole]
+    crossing = np.flatnonzero(~whole)
+    Fc = F[crossing]
+    u, w = Fc.ravel(), Fc[:, [1, 2, 0]].ravel()
+    face = np.repeat(crossing, 3)
+    same = vb[u] == vb[w]
+    f1, f2, eu, ew = _face_pairs(u[~same], w[~same], face[~same], n)
     e_lo, e_hi = np.minimum(vb[eu], vb[ew]), np.maximum(vb[eu], vb[ew])
-    rows, k = _expand(e_lo, e_hi)
-    corner_face = np.repeat(np.arange(m), 3)
-    corner_piece = piece(corner_face, vb[F.ravel()])
-    comp_of = _components(n_pieces + n, np.concatenate([piece(f1[rows], k), corner_piece]),
-                          np.concatenate([piece(f2[rows], k), n_pieces + F.ravel()]))
-    used, piece_node = np.unique(comp_of[:n_pieces], return_inverse=True)
+    rows, k = _expand(e_lo + 1, e_hi - 1)
+    label = _components(n + len(x_face),
+                        np.concatenate([Fw[:, 0], Fw[:, 0], u[same], piece_id(f1[rows], k)]),
+                        np.concatenate([Fw[:, 1], Fw[:, 2], w[same], piece_id(f2[rows], k)]))
+    referenced = np.zeros(n, dtype=bool)
+    referenced[F.ravel()] = True
+    ids = np.concatenate([np.flatnonzero(referenced), n + np.arange(len(x_face))])
+    used, inverse = np.unique(label[ids], return_inverse=True)
+    node = np.full(n + len(x_face), -1, dtype=np.int64)
+    node[ids] = inverse
     n_nodes = len(used)
-    hub_comp = comp_of[n_pieces:]
-    vertex_node = np.minimum(np.searchsorted(used, hub_comp), n_nodes - 1)
-    vertex_node[used[vertex_node] != hub_comp] = -1  # unreferenced vertices belong to no node
+    vertex_node = node[:n]
     node_band = np.zeros(n_nodes, dtype=np.int64)
-    node_band[piece_node] = piece_band
+    node_band[vertex_node[referenced]] = vb[referenced]
+    node_band[node[n:]] = x_band
+
+    def node_of(face, band):
+        return node[piece_id(face, band)]
 
     # contours: (triangle, level) crossings joined through edges crossing the level
-    c_face, c_level = _expand(t_lo + 1, t_hi)
-    c_offset = np.cumsum(span - 1) - (span - 1)
+    span1 = b2 - b0
+    c_face, c_level = _expand(b0 + 1, b2)
+    c_offset = np.cumsum(span1) - span1
     rows_c, kc = _expand(e_lo + 1, e_hi)
-    contour = _components(len(c_face), c_offset[f1[rows_c]] + kc - t_lo[f1[rows_c]] - 1,
-                          c_offset[f2[rows_c]] + kc - t_lo[f2[rows_c]] - 1) if len(c_face) else np.zeros(0, np.int64)
+    if len(c_face):
+        contour = _components(len(c_face), c_offset[f1[rows_c]] + kc - b0[f1[rows_c]] - 1,
+                              c_offset[f2[rows_c]] + kc - b0[f2[rows_c]] - 1)
+    else:
+        contour = np.zeros(0, np.int64)
     _, first = np.unique(contour, return_index=True)
     rep_face, rep_level = c_face[first], c_level[first]
-    below_node = piece_node[piece(rep_face, rep_level - 1)]
-    above_node = piece_node[piece(rep_face, rep_level)]
+    below_node = node_of(rep_face, rep_level - 1)
+    above_node = node_of(rep_face, rep_level)
 
     genus = None
     if closed:
-        # Euler characteristic of each closed band component from the mesh cut along the levels:
+        # Euler characteristic of each closed band component, from the mesh cut along the levels:
         # vertices (mesh vertices + edge crossings on both bounding levels), edges (mesh-edge
         # segments + contour segments on both bounding levels), faces (pieces).
-        count = lambda idx: np.bincount(idx, minlength=n_nodes)  # noqa: E731
-        rows_x, jx = rows_c, kc
-        verts = (count(vertex_node[vertex_node >= 0]) + count(piece_node[piece(f1[rows_x], jx - 1)])
-                 + count(piece_node[piece(f1[rows_x], jx)]))
-        edges = (count(piece_node[piece(f1[rows], k)]) + count(piece_node[piece(c_face, c_level - 1)])
-                 + count(piece_node[piece(c_face, c_level)]))
-        chi = verts - edges + count(piece_node)
-        degree = count(below_node) + count(above_node)
-        genus = (2 - chi - degree) // 2
-    return _Partition(piece_face, piece_band, piece_node, vertex_node, node_band, below_node, above_node,
-                      rep_level, genus)
+        def count(idx):
+            return np.bincount(idx, minlength=n_nodes)
+
+        whole_owner = vertex_node[Fw[:, 0]]
+        verts = (count(vertex_node[referenced]) + count(node_of(f1[rows_c], kc - 1)) + count(node_of(f1[rows_c], kc)))
+        rows_s, ks = _expand(e_lo, e_hi)
+        same_half_edges = 3 * count(whole_owner) + count(vertex_node[u[same]])  # each edge twice (closed)
+        edges = (same_half_edges // 2 + count(node_of(f1[rows_s], ks))
+                 + count(node_of(c_face, c_level - 1)) + count(node_of(c_face, c_level)))
+        p_rows, p_band = _expand(b0[crossing], b2[crossing])
+        faces = count(whole_owner) + count(node_of(crossing[p_rows], p_band))
+        genus = (2 - verts + edges - faces - count(below_node) - count(above_node)) // 2
+    return _Partition(vb, b0, b2, vertex_node, node_band, node_of, below_node, above_node, rep_level, genus)
 
 
 #: Upper bound on the rounds of band splitting in :func:`reeb_graph`.
@@ -199,6 +241,7 @@ def reeb_graph(
     root: np.ndarray | None = None,
     root_mode: Literal["first_band", "nearest", "none"] = "first_band",
     split_handle_bands: bool = True,
+    closed: bool | None = None,
 ) -> ReebGraph:
     """Reeb graph of the vertex function ``f`` with the bands of ``levels``.
 
@@ -219,48 +262,73 @@ def reeb_graph(
         component of positive genus, i.e. a band that contains a whole handle and
         would hide its cycle. The thesis's uniform levels are kept everywhere else.
         ``ReebGraph.levels`` holds the levels actually used.
+    closed : bool, optional
+        Whether the mesh is a closed manifold, if known (e.g. from ``clean``);
+        computed when None and ``split_handle_bands`` is on.
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
     f = np.asarray(f, dtype=np.float64)
     levels = np.asarray(levels, dtype=np.float64)
-    pairs = _edge_face_pairs(F)
-    part = _partition(F, f, levels, pairs)
+    if split_handle_bands and closed is None:
+        closed = is_closed_manifold(F)
+    split = bool(split_handle_bands and closed)
+    part = _partition(F, f, levels, split)
     for _ in range(MAX_SPLIT_ROUNDS):
-        if not split_handle_bands or part.genus is None or not np.any(part.genus > 0):
+        if not split or not np.any(part.genus > 0):
             break
         bands = np.unique(part.node_band[part.genus > 0])
         levels = np.union1d(levels, (levels[bands] + levels[bands + 1]) / 2)
-        part = _partition(F, f, levels, pairs)
+        part = _partition(F, f, levels, split)
     return _assemble(V, F, f, levels, part, root, root_mode)
 
 
 def _assemble(V, F, f, levels, part: _Partition, root, root_mode) -> ReebGraph:
     """Measure the nodes exactly and build the networkx graph."""
+    import igl
+
     n_bands = len(levels) - 1
-    piece_face, piece_band, piece_node = part.piece_face, part.piece_band, part.piece_node
     n_nodes = len(part.node_band)
-    order = np.argsort(f[F], axis=1, kind="stable")
-    Fs = np.take_along_axis(F, order, axis=1)[piece_face]
-    fs = np.take_along_axis(f[F], order, axis=1)[piece_face]
+
+    def per_node(index, weights):
+        return np.bincount(index, weights=weights, minlength=n_nodes).astype(np.float64, copy=False)
+
+    # triangles inside one band: whole-triangle measures
+    whole = part.t_lo == part.t_hi
+    area_t = 0.5 * igl.doublearea(V, F).ravel()
+    Fw = F[whole]
+    owner = part.vertex_node[Fw[:, 0]]
+    aw = area_t[whole]
+    cw = (V[Fw[:, 0]] + V[Fw[:, 1]] + V[Fw[:, 2]]) / 3.0
+    area = per_node(owner, aw)
+    moment = np.stack([per_node(owner, aw * cw[:, j]) for j in range(3)], 1)
+    integral = per_node(owner, aw * (f[Fw[:, 0]] + f[Fw[:, 1]] + f[Fw[:, 2]]) / 3.0)
+
+    # triangles across bands: closed-form measures of each piece
+    crossing = np.flatnonzero(~whole)
+    rows, piece_band = _expand(part.t_lo[crossing], part.t_hi[crossing])
+    piece_face = crossing[rows]
+    piece_node = part.node_of(piece_face, piece_band)
+    order = np.argsort(f[F[piece_face]], axis=1, kind="stable")
+    Fs = np.take_along_axis(F[piece_face], order, axis=1)
+    fs = f[Fs]
     Pa, Pb, Pc = V[Fs[:, 0]], V[Fs[:, 1]], V[Fs[:, 2]]
-    tri_area = 0.5 * np.linalg.norm(np.cross(Pb - Pa, Pc - Pa), axis=1)
+    tri_area = area_t[piece_face]
     lower = np.where(piece_band == 0, -np.inf, levels[piece_band])
     upper = np.where(piece_band == n_bands - 1, np.inf, levels[np.minimum(piece_band + 1, n_bands)])
     A1, M1, I1 = below(Pa, Pb, Pc, fs[:, 0], fs[:, 1], fs[:, 2], tri_area, upper)
     A0, M0, I0 = below(Pa, Pb, Pc, fs[:, 0], fs[:, 1], fs[:, 2], tri_area, lower)
-
-    def per_node(weights):
-        return np.bincount(piece_node, weights=weights, minlength=n_nodes)
-
-    area = per_node(A1 - A0)
-    moment = np.stack([per_node((M1 - M0)[:, j]) for j in range(3)], 1)
-    integral = per_node(I1 - I0)
-    # fallback for zero-area nodes (a band touched only at vertices): mean of the touching triangles
-    fallback = np.stack([per_node((Pa + Pb + Pc)[:, j] / 3) for j in range(3)], 1)
-    fallback /= np.maximum(per_node(np.ones(len(piece_node))), 1)[:, None]
+    area += per_node(piece_node, A1 - A0)
+    moment += np.stack([per_node(piece_node, (M1 - M0)[:, j]) for j in range(3)], 1)
+    integral += per_node(piece_node, I1 - I0)
     has_area = area > 1e-300
-    pos = np.where(has_area[:, None], moment / np.where(has_area, area, 1)[:, None], fallback)
+    pos = moment / np.where(has_area, area, 1)[:, None]
+    if not has_area.all():  # a band met only at a vertex or an edge: mean centroid of its triangles
+        owners = np.concatenate([owner, piece_node])
+        centres = np.concatenate([cw, (Pa + Pb + Pc) / 3])
+        touched = per_node(owners, np.ones(len(owners)))
+        fallback = np.stack([per_node(owners, centres[:, j]) for j in range(3)], 1) / np.maximum(touched, 1)[:, None]
+        pos[~has_area] = fallback[~has_area]
     node_band = part.node_band
     mid = (levels[node_band] + levels[np.minimum(node_band + 1, n_bands)]) / 2
     value = np.where(has_area, integral / np.where(has_area, area, 1), mid)

@@ -163,12 +163,14 @@ class _Problem:
         self.n = self.Q.shape[0]
         self.d = np.asarray(self.K.sum(axis=1)).ravel()
         self.area = float(self.d.sum())
-        self.c = np.full(self.n, 1.0 / np.sqrt(self.area))  # K-normalised constant
-        self.Kc = self.d / np.sqrt(self.area)  # K @ c
+        self.c0 = 1.0 / np.sqrt(self.area)
+        self.c = np.full(self.n, self.c0)  # K-normalised constant
+        self.Kc = self.d * self.c0  # K @ c
+        self.inv_d = 1.0 / self.d
 
     def deflate(self, X: np.ndarray) -> np.ndarray:
         """``X`` minus its K-projection on the constant."""
-        return X - np.outer(self.c, self.Kc @ X)
+        return X - self.c0 * (self.Kc @ X)
 
     def residuals(self, X: np.ndarray, theta: np.ndarray, QX: np.ndarray | None = None,
                   KX: np.ndarray | None = None) -> np.ndarray:
@@ -176,28 +178,28 @@ class _Problem:
         QX = self.Q @ X if QX is None else QX
         KX = self.K @ X if KX is None else KX
         R = QX - KX * theta
-        return np.sqrt(np.einsum("ij,ij->j", R, R / self.d[:, None])) / np.abs(theta)
+        return np.sqrt(np.einsum("ij,ij,i->j", R, R, self.inv_d)) / np.abs(theta)
 
-    def k_orthonormalize(self, X: np.ndarray) -> np.ndarray:
-        """K-orthonormal basis of span(X) deflated of the constant (columns may be dropped)."""
+    def k_orthonormalize(self, X: np.ndarray, with_kx: bool = False):
+        """K-orthonormal basis of span(X) deflated of the constant (columns may be dropped).
+
+        With ``with_kx``, also returns ``K`` times the basis.
+        """
         X = self.deflate(X)
-        G = X.T @ (self.K @ X)
+        KX = self.K @ X
+        G = X.T @ KX
         w, U = np.linalg.eigh((G + G.T) / 2)
         keep = w > 1e-12 * max(w.max(), 0.0)
-        return X @ (U[:, keep] / np.sqrt(w[keep]))
+        T = U[:, keep] / np.sqrt(w[keep])
+        return (X @ T, KX @ T) if with_kx else X @ T
 
 
-def _start_block(prob: _Problem, p: int, V: np.ndarray | None, seed: int) -> np.ndarray:
-    """A start block (n, p): principal-axis coordinates of ``V`` (and their products) plus 5% noise.
+def _axis_functions(prob: _Problem, V: np.ndarray, p: int) -> np.ndarray:
+    """(n, p) smooth functions of the vertices: principal-axis coordinates, then their products.
 
-    Without ``V``, seeded Gaussian vectors. The noise keeps every eigenvector present in
-    the start (a symmetric mesh could otherwise hide the Fiedler vector from coordinate
-    functions that are all odd under the symmetry).
+    The axes are the eigenvectors of the area-weighted covariance, ordered by decreasing
+    variance; every column has unit area-weighted RMS.
     """
-    rng = np.random.default_rng(seed)
-    noise = rng.standard_normal((prob.n, p))
-    if V is None:
-        return noise
     V = np.asarray(V, dtype=np.float64)
     w = prob.d / prob.area
     X = V - w @ V
@@ -207,8 +209,22 @@ def _start_block(prob: _Problem, p: int, V: np.ndarray | None, seed: int) -> np.
     cols = [X[:, 0], X[:, 1], X[:, 2], X[:, 0] ** 2, X[:, 0] * X[:, 1], X[:, 1] ** 2, X[:, 2] ** 2,
             X[:, 0] * X[:, 2], X[:, 1] * X[:, 2]]
     B = np.column_stack([cols[j % len(cols)] for j in range(p)])
-    scale = np.sqrt(np.einsum("ij,ij,i->j", B, B, w)) + 1e-300
-    return B / scale + 0.05 * noise
+    B = prob.deflate(B)
+    return B / (np.sqrt(np.einsum("ij,ij,i->j", B, B, w)) + 1e-300)
+
+
+def _start_block(prob: _Problem, p: int, V: np.ndarray | None, seed: int, noise: float = 0.05) -> np.ndarray:
+    """A start block (n, p): :func:`_axis_functions` of ``V`` plus ``noise`` times seeded Gaussian vectors.
+
+    Without ``V``, Gaussian vectors only. The noise keeps every eigenvector present in
+    the start (on a symmetric mesh the coordinate functions can all be odd under a
+    symmetry under which the Fiedler vector is even, and a Krylov space grown from them
+    would never contain it); the first inverse iteration damps its high frequencies.
+    """
+    G = np.random.default_rng(seed).standard_normal((prob.n, p))
+    if V is None:
+        return G
+    return _axis_functions(prob, V, p) + noise * G
 
 
 def _rayleigh_estimate(prob: _Problem, X: np.ndarray) -> float:
@@ -221,13 +237,13 @@ def _rayleigh_estimate(prob: _Problem, X: np.ndarray) -> float:
 
 
 def _auto_shift(prob: _Problem, V: np.ndarray | None) -> float:
-    """sigma = -0.01 * (Rayleigh quotient of the principal-axis coordinate), an upper bound of lambda2.
+    """sigma = -0.01 * (Rayleigh quotient of the first principal-axis coordinate), an upper bound of lambda2.
 
     Without ``V``: ``-1e-8 * median(diag Q / diag K)`` (``diag Q / diag K`` ~ lambda_max ~ n lambda2
     on a surface mesh).
     """
     if V is not None:
-        est = _rayleigh_estimate(prob, _start_block(prob, 1, V, seed=0))
+        est = _rayleigh_estimate(prob, _axis_functions(prob, V, 1))
         if np.isfinite(est) and est > 0:
             return -0.01 * est
     ratio = np.median(prob.Q.diagonal() / prob.K.diagonal())
@@ -302,7 +318,7 @@ class _NotConverged(Exception):
 
 
 def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0: np.ndarray, nev: int,
-                  tol: float, maxiter: int, max_basis: int) -> tuple[np.ndarray, np.ndarray, int, int]:
+                  tol: float, maxiter: int, max_basis: int, guard: int = 0) -> tuple[np.ndarray, np.ndarray, int, int]:
     """Block Krylov–Rayleigh–Ritz with ``W = S^{-1} K``, locking and thick restarts.
 
     Returns the nev smallest Ritz values, their K-normalised Ritz vectors, the number of
@@ -324,7 +340,7 @@ def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0:
         for _ in range(2):
             if m:
                 B = B - Z[:, :m] @ (KZ[:, :m].T @ B)
-        B = prob.k_orthonormalize(B)
+        B, KB = prob.k_orthonormalize(B, with_kx=True)
         b = B.shape[1]
         if b == 0:
             raise _NotConverged("the Krylov space stopped growing (breakdown)")
@@ -340,28 +356,27 @@ def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0:
             H[keep:, :keep] = 0
             m = keep
             B = B - Z[:, :m] @ (KZ[:, :m].T @ B)
-            B = prob.k_orthonormalize(B)
+            B, KB = prob.k_orthonormalize(B, with_kx=True)
             b = min(B.shape[1], max_basis - m)
-            B = B[:, :b]
+            B, KB = B[:, :b], KB[:, :b]
         QB = prob.Q @ B
         Z[:, m:m + b] = B
         QZ[:, m:m + b] = QB
-        KZ[:, m:m + b] = prob.K @ B
+        KZ[:, m:m + b] = KB
         Hn = Z[:, :m + b].T @ QB
         H[:m + b, m:m + b] = Hn
         H[m:m + b, :m + b] = Hn.T
         m += b
         H[:m, :m] = (H[:m, :m] + H[:m, :m].T) / 2
-        r = min(nev, m)
-        theta, S = la.eigh(H[:m, :m], subset_by_index=[0, min(m, nev + 1) - 1])
-        theta, S = theta[:r], S[:, :r]
+        r = min(nev + guard, m)
+        theta, S = la.eigh(H[:m, :m], subset_by_index=[0, r - 1])
         QX = QZ[:, :m] @ S
         KX = KZ[:, :m] @ S
-        res = prob.residuals(None, theta, QX=QX, KX=KX) if r else res
-        if r == nev and np.all(res <= tol):
-            return theta, Z[:, :m] @ S, step, n_solves
-        # expand with W x for the unconverged wanted Ritz vectors (all of them before r == nev)
-        todo = np.flatnonzero(res > tol) if r == nev else np.arange(r)
+        res = prob.residuals(None, theta, QX=QX, KX=KX)
+        if r >= nev and np.all(res[:nev] <= tol):
+            return theta[:nev], Z[:, :m] @ S[:, :nev], step, n_solves
+        # expand with W x for the unconverged wanted Ritz vectors and the guards
+        todo = np.concatenate([np.flatnonzero(res[:nev] > tol), np.arange(nev, r)])
         B = solve(KX[:, todo])
         n_solves += len(todo)
     raise _NotConverged(f"no convergence in {maxiter} block steps (residuals {np.array2string(res, precision=2)}, "
@@ -521,8 +536,9 @@ def skewness(vectors: np.ndarray, d: np.ndarray) -> np.ndarray:
     vectors = np.asarray(vectors, dtype=np.float64)
     if vectors.ndim == 1:
         vectors = vectors[:, None]
-    m2 = d @ vectors**2
-    m3 = d @ vectors**3
+    sq = vectors * vectors
+    m2 = d @ sq
+    m3 = np.einsum("i,ij,ij->j", d, sq, vectors)
     with np.errstate(divide="ignore", invalid="ignore"):
         g = m3 * np.sqrt(d.sum()) / m2**1.5
     return np.nan_to_num(g)

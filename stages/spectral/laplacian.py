@@ -93,16 +93,16 @@ def _double_areas_and_sq_lengths(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarr
     libigl's ``doublearea`` from edge lengths does; a negative radicand (round-off on a
     degenerate triangle) gives 0.
     """
-    P0, P1, P2 = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
-    e0, e1, e2 = P2 - P1, P0 - P2, P1 - P0
+    X = np.ascontiguousarray(V.T)[:, F]  # (3, m, 3): coordinate, triangle, corner
     s = np.empty((F.shape[0], 3))
-    s[:, 0] = np.einsum("ij,ij->i", e0, e0)
-    s[:, 1] = np.einsum("ij,ij->i", e1, e1)
-    s[:, 2] = np.einsum("ij,ij->i", e2, e2)
+    for k, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):  # the edge opposite corner k
+        e = X[:, :, i] - X[:, :, j]
+        s[:, k] = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
     l = np.sqrt(s)
-    a = l.max(axis=1)
-    c = l.min(axis=1)
-    b = l.sum(axis=1) - a - c
+    l0, l1, l2 = l[:, 0], l[:, 1], l[:, 2]
+    a = np.maximum(np.maximum(l0, l1), l2)
+    c = np.minimum(np.minimum(l0, l1), l2)
+    b = (l0 + l1 + l2) - a - c
     radicand = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
     dbl = 0.5 * np.sqrt(np.maximum(radicand, 0.0))
     return s, dbl
@@ -135,18 +135,24 @@ def _assemble(n: int, F: np.ndarray, s: np.ndarray, dbl: np.ndarray) -> tuple[sp
         # half the cotangent of the angle at corner k: (s_a + s_b - s_k) / (4 * double area)
         C = (s[:, [1, 2, 0]] + s[:, [2, 0, 1]] - s) / (4.0 * dbl[:, None])
     C0, C1, C2 = C[:, 0], C[:, 1], C[:, 2]
-    i0, i1, i2 = F[:, 0], F[:, 1], F[:, 2]
-    diag_q = (np.bincount(i0, C1 + C2, n) + np.bincount(i1, C2 + C0, n) + np.bincount(i2, C0 + C1, n))
-    diag_k = (np.bincount(i0, dbl, n) + np.bincount(i1, dbl, n) + np.bincount(i2, dbl, n)) / 12.0
-    off_k = dbl / 24.0
-    ar = np.arange(n)
-    rows = np.concatenate([i1, i2, i2, i0, i0, i1, ar])
-    cols = np.concatenate([i2, i1, i0, i2, i1, i0, ar])
+    m = F.shape[0]
+    idx = np.int32 if n < 2**31 - 1 else np.int64
+    Fi = F.astype(idx)
+    i0, i1, i2 = Fi[:, 0], Fi[:, 1], Fi[:, 2]
+    # COO entries: 6 per triangle (its three edges, both directions), then the diagonal
+    rows = np.empty(6 * m + n, dtype=idx)
+    cols = np.empty(6 * m + n, dtype=idx)
+    rows[:6 * m].reshape(6, m)[:] = (i1, i2, i2, i0, i0, i1)
+    cols[:6 * m].reshape(6, m)[:] = (i2, i1, i0, i2, i1, i0)
+    rows[6 * m:] = cols[6 * m:] = np.arange(n, dtype=idx)
     # One COO -> CSR conversion (duplicates summed) for both matrices: Q in the real part,
     # K in the imaginary part of a complex matrix, so they share one sorted pattern.
-    data = np.empty(rows.size, dtype=np.complex128)
-    data.real = np.concatenate([-C0, -C0, -C1, -C1, -C2, -C2, diag_q])
-    data.imag = np.concatenate([off_k, off_k, off_k, off_k, off_k, off_k, diag_k])
+    data = np.empty(6 * m + n, dtype=np.complex128)
+    off = data[:6 * m].reshape(6, m)
+    off.real[:] = (-C0, -C0, -C1, -C1, -C2, -C2)
+    off.imag[:] = dbl / 24.0
+    data.real[6 * m:] = np.bincount(Fi.ravel(), (C[:, [1, 2, 0]] + C[:, [2, 0, 1]]).ravel(), n)
+    data.imag[6 * m:] = np.bincount(Fi.ravel(), np.repeat(dbl, 3), n) / 12.0
     Z = sp.coo_matrix((data, (rows, cols)), shape=(n, n)).tocsr()
     Z.sum_duplicates()
     Q = sp.csr_matrix((np.ascontiguousarray(Z.data.real), Z.indices, Z.indptr), shape=(n, n))
