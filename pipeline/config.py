@@ -38,8 +38,13 @@ from pipeline.params import Params, validate_json_strict
 from pipeline.paths import display_path, resolve_input
 from pipeline.registry import StageSpec, get_stage
 
-#: State entries that the inputs provide before the first stage.
-INPUT_STATE = {"meshes": ("path",)}
+#: State entries that each kind of input provides before the first stage.
+INPUT_STATE = {
+    "meshes": ("path",),
+    "images": ("path",),
+    "pairs": ("fixed_path", "moving_path", "truth"),
+    "pairs_csv": ("fixed_path", "moving_path", "truth"),
+}
 
 
 class _Strict(BaseModel):
@@ -54,10 +59,44 @@ class ExecutorConfig(_Strict):
     address: str | None = Field(None, description="dask scheduler address; none starts a local cluster")
 
 
+class PairConfig(_Strict):
+    """A fixed/moving image pair with an optional known transform."""
+
+    fixed: str
+    moving: str
+    truth: dict[str, float] | None = Field(None, description="known parameters, e.g. {tx: 13, ty: 17, angle: 0}")
+
+
+class PairsCsvConfig(_Strict):
+    """Image pairs listed in a CSV file (paths relative to the CSV's folder)."""
+
+    path: str
+    fixed_column: str = "fixed"
+    moving_column: str = "moving"
+    truth_columns: dict[str, str] = Field(default_factory=dict, description="truth name -> CSV column")
+    skip_missing_truth: bool = Field(True, description="leave out rows whose truth cells are empty")
+
+
 class InputsConfig(_Strict):
     """Input files, as path templates ({bundled}, {data_root}, globs)."""
 
     meshes: list[str] = Field(default_factory=list)
+    images: list[str] = Field(default_factory=list)
+    pairs: list[PairConfig] = Field(default_factory=list)
+    pairs_csv: PairsCsvConfig | None = None
+
+
+@dataclass(frozen=True)
+class InputUnit:
+    """One input of a run: files for state entries (``paths``) and plain values (``values``)."""
+
+    label: str
+    paths: dict[str, Path]
+    values: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def primary(self) -> Path:
+        return next(iter(self.paths.values()))
 
 
 class RawConfig(_Strict):
@@ -106,10 +145,12 @@ class Item:
     """One unit of work: one input file at one sweep point."""
 
     item_id: str
-    input_path: str
+    input_path: str  # the primary input file (the mesh, the image, the fixed image of a pair)
     sweep: dict[str, Any]
     calls: tuple[StageCall, ...]
-    input_label: str = ""  # input_path as shown in tables ({bundled}/..., {data_root}/...)
+    input_label: str = ""  # the input as shown in tables ({bundled}/..., {data_root}/...)
+    paths: dict[str, str] = field(default_factory=dict)  # state key -> file
+    values: dict[str, Any] = field(default_factory=dict)  # state key -> value
 
 
 @dataclass
@@ -120,7 +161,7 @@ class Experiment:
     source: Path | None
     calls: tuple[StageCall, ...]
     reports: tuple[ReportCall, ...]
-    inputs: list[Path] = field(default_factory=list)
+    inputs: list[InputUnit] = field(default_factory=list)
     data_root: Path | None = None
 
     @property
@@ -135,15 +176,15 @@ class Experiment:
     def items(self) -> list[Item]:
         """Every (input, sweep point) pair with its resolved stage calls."""
         out = []
-        names = [p.name for p in self.inputs]
-        for path in self.inputs:
-            label = display_path(path, self.data_root)
-            base = path.name if names.count(path.name) == 1 else label
+        names = [u.primary.name for u in self.inputs]
+        for unit in self.inputs:
+            base = unit.primary.name if names.count(unit.primary.name) == 1 and len(unit.paths) == 1 else unit.label
             for point in self.sweep_points():
                 calls = tuple(_with_overrides(self.calls, point))
                 suffix = ",".join(f"{k}={v}" for k, v in point.items())
                 item_id = base + (f"[{suffix}]" if suffix else "")
-                out.append(Item(item_id, str(path), point, calls, label))
+                out.append(Item(item_id, str(unit.primary), point, calls, unit.label,
+                                {k: str(v) for k, v in unit.paths.items()}, dict(unit.values)))
         return out
 
     def resolved(self) -> dict[str, Any]:
@@ -151,7 +192,7 @@ class Experiment:
         return {
             "name": self.raw.name,
             "description": self.raw.description,
-            "inputs": {"meshes": [display_path(p, self.data_root) for p in self.inputs]},
+            "inputs": [{"label": u.label, **u.values} for u in self.inputs],
             "sweep": self.raw.sweep,
             "stages": [{c.spec.name: c.params.canonical()} for c in self.calls],
             "stage_versions": {c.spec.name: c.spec.version for c in self.calls},
@@ -267,15 +308,61 @@ def build_experiment(
     experiment = Experiment(raw=raw, source=source, calls=calls, reports=reports)
     if resolve_inputs:
         base = source.parent if source else Path.cwd()
-        paths: list[Path] = []
-        for i, template in enumerate(raw.inputs.meshes):
-            try:
-                paths.extend(resolve_input(template, base_dir=base, root=data_root, where=f"inputs.meshes[{i}]"))
-            except ConfigError as exc:
-                raise ConfigError(prefix + str(exc)) from None
+        try:
+            paths = resolve_inputs_config(raw.inputs, base_dir=base, data_root=data_root)
+        except ConfigError as exc:
+            raise ConfigError(prefix + str(exc)) from None
         experiment.inputs = paths
         experiment.data_root = data_root
     return experiment
+
+
+def resolve_inputs_config(inputs: InputsConfig, *, base_dir: Path, data_root: Path | None) -> list[InputUnit]:
+    """Expand every kind of input into :class:`InputUnit` objects (files checked to exist)."""
+    units: list[InputUnit] = []
+
+    def one(template: str, where: str, base: Path = base_dir) -> list[Path]:
+        return resolve_input(template, base_dir=base, root=data_root, where=where)
+
+    for kind in ("meshes", "images"):
+        for i, template in enumerate(getattr(inputs, kind)):
+            units += [InputUnit(display_path(p, data_root), {"path": p}) for p in one(template, f"inputs.{kind}[{i}]")]
+    for i, pair in enumerate(inputs.pairs):
+        (fixed,) = one(pair.fixed, f"inputs.pairs[{i}].fixed")[:1]
+        (moving,) = one(pair.moving, f"inputs.pairs[{i}].moving")[:1]
+        units.append(InputUnit(f"{fixed.name}|{moving.name}", {"fixed_path": fixed, "moving_path": moving},
+                               {"truth": pair.truth}))
+    if inputs.pairs_csv is not None:
+        units += _pairs_from_csv(inputs.pairs_csv, one)
+    return units
+
+
+def _pairs_from_csv(spec: PairsCsvConfig, one) -> list[InputUnit]:
+    import csv
+
+    (path,) = one(spec.path, "inputs.pairs_csv.path")[:1]
+    with open(path, newline="", encoding="utf-8") as fh:
+        rows = list(csv.DictReader(fh))
+    units = []
+    for r, row in enumerate(rows):
+        where = f"{path}: row {r + 2}"
+        missing = [c for c in [spec.fixed_column, spec.moving_column, *spec.truth_columns.values()] if c not in row]
+        if missing:
+            raise ConfigError(f"{where}: no column {missing[0]!r} (columns: {', '.join(row)})")
+        cells = {name: row[col].strip() for name, col in spec.truth_columns.items()}
+        if any(v == "" for v in cells.values()):
+            if spec.skip_missing_truth:
+                continue
+            raise ConfigError(f"{where}: empty truth cell")
+        try:
+            truth = {name: float(v) for name, v in cells.items()} or None
+        except ValueError as exc:
+            raise ConfigError(f"{where}: truth is not a number ({exc})") from None
+        fixed = one(row[spec.fixed_column], f"{where} fixed", path.parent)[0]
+        moving = one(row[spec.moving_column], f"{where} moving", path.parent)[0]
+        units.append(InputUnit(f"{fixed.name}|{moving.name}", {"fixed_path": fixed, "moving_path": moving},
+                               {"truth": truth}))
+    return units
 
 
 def load_experiment(

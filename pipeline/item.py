@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import time
 import traceback
 from dataclasses import dataclass, field
@@ -66,11 +68,14 @@ def run_item(item: Item, cache_root: str | None) -> ItemResult:
     cache = Cache(cache_root)
     out = ItemResult(item.item_id, item.input_path, dict(item.sweep), item.input_label)
     state: dict[str, tuple[Any, str]] = {}
-    try:
-        state["path"] = (item.input_path, hash_file(item.input_path))
-    except OSError as exc:
-        out.error = f"{item.input_path}: cannot read input ({exc.strerror or exc})"
-        return out
+    for key, path in (item.paths or {"path": item.input_path}).items():
+        try:
+            state[key] = (path, hash_file(path))
+        except OSError as exc:
+            out.error = f"{path}: cannot read input ({exc.strerror or exc})"
+            return out
+    for key, value in item.values.items():
+        state[key] = (value, hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode()).hexdigest())
     for call in item.calls:
         spec = call.spec
         key = stage_key(spec.name, spec.version, call.params.canonical(), [state[k][1] for k in spec.consumes])

@@ -28,7 +28,7 @@ Methods
     smoothed-aggregation hierarchy of ``S``, the constant as a constraint. No
     factorisation: O(nnz) memory, for meshes too large to factor.
 ``multilevel``
-    Decimate the mesh (fast-simplification, ``coarse_vertices``), solve the coarse
+    Decimate the mesh (fast-simplification, to ``min(coarse_vertices, n / 4)`` vertices), solve the coarse
     problem exactly (``shift_invert``), prolong the coarse eigenvectors to the fine mesh
     by barycentric interpolation on the closest coarse triangle, and refine on the fine
     mesh with LOBPCG + AMG. Needs ``V`` and ``F``.
@@ -213,7 +213,8 @@ def _axis_functions(prob: _Problem, V: np.ndarray, p: int) -> np.ndarray:
     return B / (np.sqrt(np.einsum("ij,ij,i->j", B, B, w)) + 1e-300)
 
 
-def _start_block(prob: _Problem, p: int, V: np.ndarray | None, seed: int, noise: float = 0.05) -> np.ndarray:
+def _start_block(prob: _Problem, p: int, V: np.ndarray | None, seed: int, noise: float = 0.05,
+                 axis: np.ndarray | None = None) -> np.ndarray:
     """A start block (n, p): :func:`_axis_functions` of ``V`` plus ``noise`` times seeded Gaussian vectors.
 
     Without ``V``, Gaussian vectors only. The noise keeps every eigenvector present in
@@ -224,7 +225,7 @@ def _start_block(prob: _Problem, p: int, V: np.ndarray | None, seed: int, noise:
     G = np.random.default_rng(seed).standard_normal((prob.n, p))
     if V is None:
         return G
-    return _axis_functions(prob, V, p) + noise * G
+    return (_axis_functions(prob, V, p) if axis is None else axis) + noise * G
 
 
 def _rayleigh_estimate(prob: _Problem, X: np.ndarray) -> float:
@@ -236,14 +237,15 @@ def _rayleigh_estimate(prob: _Problem, X: np.ndarray) -> float:
     return float(np.min(num[ok] / den[ok])) if ok.any() else 1.0
 
 
-def _auto_shift(prob: _Problem, V: np.ndarray | None) -> float:
+def _auto_shift(prob: _Problem, V: np.ndarray | None, axis: np.ndarray | None = None) -> float:
     """sigma = -0.01 * (Rayleigh quotient of the first principal-axis coordinate), an upper bound of lambda2.
 
-    Without ``V``: ``-1e-8 * median(diag Q / diag K)`` (``diag Q / diag K`` ~ lambda_max ~ n lambda2
-    on a surface mesh).
+    ``axis`` (n, >= 1) are precomputed :func:`_axis_functions`. Without ``V``:
+    ``-1e-8 * median(diag Q / diag K)`` (``diag Q / diag K`` ~ lambda_max ~ n lambda2 on a surface mesh).
     """
     if V is not None:
-        est = _rayleigh_estimate(prob, _axis_functions(prob, V, 1))
+        axis = _axis_functions(prob, V, 1) if axis is None else axis
+        est = _rayleigh_estimate(prob, axis[:, :1])
         if np.isfinite(est) and est > 0:
             return -0.01 * est
     ratio = np.median(prob.Q.diagonal() / prob.K.diagonal())
@@ -270,7 +272,14 @@ class ShiftInvert:
         if not sigma < 0:
             raise ValueError(f"sigma must be negative, got {sigma}")
         self.sigma = float(sigma)
-        S = (sp.csr_matrix(Q) - self.sigma * sp.csr_matrix(K)).tocsc()
+        Q, K = sp.csr_matrix(Q), sp.csr_matrix(K)
+        if (Q.has_canonical_format and K.has_canonical_format and np.array_equal(Q.indptr, K.indptr)
+                and np.array_equal(Q.indices, K.indices)):
+            # same pattern (stages.spectral.laplacian assembles them so), and S is symmetric: its
+            # CSR arrays are its CSC arrays
+            S = sp.csc_matrix((Q.data - self.sigma * K.data, Q.indices, Q.indptr), shape=Q.shape)
+        else:
+            S = (Q - self.sigma * K).tocsc()
         self.n = S.shape[0]
         self.backend = backend
         if backend in ("auto", "qdldl"):
@@ -344,14 +353,14 @@ def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0:
     res = np.full(nev, np.inf)
     for step in range(1, maxiter + 1):
         # classical Gram–Schmidt against the basis, twice ("twice is enough"), then within the block;
-        # directions that lose all but 1e-10 of their norm are numerically in the span already
+        # directions that lose all but 1e-13 of their norm are numerically in the span already
         before = np.sqrt(np.einsum("ij,ij->", B, B))
         for _ in range(2):
             B = B - Z[:, :m] @ (KZ[:, :m].T @ B)
         KB = prob.K @ B
         G = B.T @ KB
         w, U = np.linalg.eigh((G + G.T) / 2)
-        keep = np.sqrt(np.maximum(w, 0.0)) > 1e-10 * before * np.sqrt(prob.d.max())
+        keep = np.sqrt(np.maximum(w, 0.0)) > 1e-13 * before * np.sqrt(prob.d.max())
         if not keep.any():
             raise _NotConverged("the Krylov space stopped growing (breakdown)")
         T = U[:, keep] / np.sqrt(w[keep])
@@ -396,14 +405,15 @@ def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0:
 
 def _shift_invert(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray | None, seed: int,
                   sigma: float | None, backend: str, X0: np.ndarray | None = None) -> _Raw:
-    sigma = _auto_shift(prob, V) if sigma is None else float(sigma)
+    p = nev + 1  # one more start vector than wanted pairs
+    axis = None if V is None else _axis_functions(prob, V, p)
+    sigma = _auto_shift(prob, V, axis) if sigma is None else float(sigma)
     try:
         fac = ShiftInvert(prob.Q, prob.K, sigma, backend=backend)
     except (RuntimeError, ValueError) as exc:  # singular factor, ...
         raise _NotConverged(f"factorisation of Q - sigma K failed ({exc})") from None
-    p = nev + 1  # one guard vector speeds up the last wanted pair
     if X0 is None:
-        X0 = _start_block(prob, p, V, seed)
+        X0 = _start_block(prob, p, V, seed, axis=axis)
     max_basis = int(min(prob.n - 1, max(12 * p, 40)))
     try:
         values, vectors, steps, n_solves = _block_krylov(prob, fac.solve, X0, nev, tol, maxiter, max_basis)
@@ -451,6 +461,9 @@ def _lobpcg(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray
             sigma: float | None, X0: np.ndarray | None = None) -> _Raw:
     import warnings
 
+    p = nev + 1
+    if prob.n < 5 * (p + 1):
+        raise _NotConverged(f"n = {prob.n} is too small for LOBPCG with {p} vectors and a constraint")
     sigma = _auto_shift(prob, V) if sigma is None else float(sigma)
     M = _amg_preconditioner(prob, sigma)
     count = [0]
@@ -460,7 +473,6 @@ def _lobpcg(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray
         return M @ X
 
     Mop = sla.LinearOperator((prob.n, prob.n), matvec=precond, matmat=precond, dtype=np.float64)
-    p = nev + 1
     X = _start_block(prob, p, V, seed) if X0 is None else X0
     X = prob.k_orthonormalize(X)
     if X.shape[1] < p:
@@ -508,9 +520,10 @@ def _multilevel(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.nda
     from stages.mesh.decimate import simplify_to_target
     from stages.spectral.laplacian import _assemble, _components, _double_areas_and_sq_lengths
 
-    if prob.n <= 2 * coarse_vertices:
-        raise _NotConverged(f"mesh too small for multilevel ({prob.n} <= 2 x {coarse_vertices} vertices)")
-    Vc, Fc, _ = simplify_to_target(V, F, 2 * coarse_vertices)
+    target = min(coarse_vertices, prob.n // 4)
+    if target < 100:
+        raise _NotConverged(f"mesh too small for multilevel ({prob.n} vertices; needs >= 400)")
+    Vc, Fc, _ = simplify_to_target(V, F, 2 * target)
     s, dbl = _double_areas_and_sq_lengths(Vc, Fc)
     keep = dbl > 0
     Fc = Fc[keep]
@@ -687,8 +700,9 @@ def smallest_eigenpairs(
         raise StageError("no eigensolver converged: " + "; ".join(attempts))
     order = np.argsort(raw.values)
     values, vectors = raw.values[order], raw.vectors[:, order]
-    scale = max(abs(values[-1]), 1e-300)
-    if values[0] <= 1e-8 * scale:
+    # diag(Q) / diag(K) ~ the largest eigenvalues; a connected mesh has lambda2 / lambda_max ~ 1 / n
+    scale = float(np.median(prob.Q.diagonal() / prob.K.diagonal()))
+    if values[0] <= 1e-12 * scale:
         raise StageError(f"lambda2 = {values[0]:.3g} is 0 up to round-off: the mesh is disconnected (one zero "
                          "eigenvalue per component); keep one component with `clean: {components: largest}`")
     vectors = fix_signs(vectors, prob.d, sign_rule)
