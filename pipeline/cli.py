@@ -58,9 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=cmd_stages)
 
+    from pipeline.retrieval_cli import add_parsers as add_retrieval
     from pipeline.skeleton_cli import add_parser as add_skeleton
 
     add_skeleton(sub)
+    add_retrieval(sub)
     return parser
 
 

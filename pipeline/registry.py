@@ -34,6 +34,9 @@ STAGE_MODULES: tuple[str, ...] = (
     "stages.reeb.level_sets",
     "stages.reeb.reeb_graph",
     "stages.reeb.prune",
+    "stages.crosscheck.libigl_reference",
+    "stages.retrieval.descriptor",
+    "stages.retrieval.baseline_stages",
     "pipeline.reports",
     "pipeline.skeleton_reports",
 )

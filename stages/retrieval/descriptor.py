@@ -1,0 +1,72 @@
+"""Shape descriptors for retrieval, one per method, and the distances between them.
+
+A :class:`Descriptor` is either the endpoint features of a skeleton (RGPD: mixture
+distance; SRG: Fiedler vector; compared by endpoint correspondence, see
+:mod:`stages.matching`) or a fixed-length vector (the baselines D2, spherical
+harmonics and ShapeDNA, compared by a vector distance). The ``descriptor`` state
+entry carries it from the stage that computes it to the index.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from pydantic import Field
+
+from pipeline.params import Params
+from pipeline.registry import stage
+from pipeline.result import StageResult
+from stages.matching.features import endpoint_features
+
+
+@dataclass(frozen=True, eq=False)
+class Descriptor:
+    """What the index stores for one mesh.
+
+    Attributes
+    ----------
+    kind : {'endpoints', 'vector'}
+    data : ndarray
+        (n, 3) endpoint features (a, dv, dc) or a 1-D vector.
+    n_endpoints : int or None
+        Endpoint count (endpoint descriptors only).
+    """
+
+    kind: str
+    data: np.ndarray
+    n_endpoints: int | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class DescriptorResult(StageResult):
+    descriptor: Descriptor
+
+    def summary(self) -> dict:
+        d = self.descriptor
+        return {"kind": d.kind, "size": int(d.data.shape[0]), "endpoints": d.n_endpoints}
+
+
+class EndpointDescriptorParams(Params):
+    """Parameters of the ``endpoint_descriptor`` stage (none yet; kept for the cache key)."""
+
+
+@stage("endpoint_descriptor", params=EndpointDescriptorParams, version=1, consumes=("skeleton",),
+       produces=("descriptor",))
+def endpoint_descriptor(skeleton, *, params: EndpointDescriptorParams) -> DescriptorResult:
+    """Endpoint features (relative area, node path, centroid path) of the pruned skeleton."""
+    f = endpoint_features(skeleton.graph)
+    return DescriptorResult(Descriptor("endpoints", f.features, f.n))
+
+
+class MatchOptions(Params):
+    """How two endpoint descriptors are compared (thesis Algorithm 2 and eq. 3.12)."""
+
+    correspondence: Literal["greedy", "greedy_sequential", "optimal"] = Field(
+        "greedy", description="globally closest pairs first, the literal sequential Algorithm 2, or optimal")
+    dissimilarity: Literal["matched", "double_sum"] = Field(
+        "matched", description="sum over matched pairs, or the literal double sum of eq. 3.12")
+    unmatched_cost: float = Field(0.0, ge=0, description="added per endpoint left without a partner")
+    endpoint_window: int | None = Field(None, ge=0, description="only compare skeletons whose endpoint "
+                                        "counts differ by at most this (thesis indexing: 2-3); none = all")
