@@ -17,7 +17,12 @@ Methods
     LDL^T (qdldl, AMD ordering) or SuperLU (MMD on A^T + A) when qdldl is missing. Then a
     block Krylov–Rayleigh–Ritz iteration with the operator ``W = S^{-1} K`` (a
     Davidson/Lanczos hybrid, full K-orthogonalisation, locking of converged pairs, thick
-    restarts): each step adds ``W x`` for the unconverged wanted Ritz vectors ``x``.
+    restarts): each step adds ``W x`` for the unconverged wanted Ritz vectors ``x`` (with
+    qdldl, which releases the GIL, the columns of a block are solved in two threads).
+    The basis holds up to ``max(6 (k - 1 + 1), 40)`` vectors (restarts more often than that
+    slow the convergence badly when many pairs are wanted). A block method finds every copy
+    of a multiple eigenvalue; ARPACK, kept as the fallback only, needs fewer solves for many
+    pairs but can miss copies (measured: one of the 7 l = 3 sphere harmonics, k = 16).
     The start block is built from the principal-axis coordinates of the vertices when
     ``V`` is given (the Fiedler vector follows the elongation of the shape, so this is
     already a good guess) plus a small seeded random part, so that no eigenvector is
@@ -70,9 +75,12 @@ Degenerate eigenvalues (``lambda2 ~ lambda3``, e.g. shapes with rotational symme
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Callable, Literal
+from typing import Callable, Iterator, Literal
 
 import numpy as np
 import scipy.linalg as la
@@ -105,7 +113,7 @@ class Eigenpairs:
     method : str
         The method that produced them ('shift_invert', 'arpack', 'lobpcg', 'multilevel', 'dense').
     iterations : int
-        Outer iterations of that method (block steps, LOBPCG iterations, ARPACK restarts).
+        Outer iterations of that method (block steps, LOBPCG iterations; 0 for ARPACK).
     n_solves : int
         Applications of the inverse or of the preconditioner to one vector.
     residuals : (k,) float64
@@ -252,6 +260,25 @@ def _auto_shift(prob: _Problem, V: np.ndarray | None, axis: np.ndarray | None = 
     return -1e-8 * float(ratio) if ratio > 0 else -1e-8
 
 
+def _available_cpus() -> int:
+    """CPUs this process may run on, at most 2 (the Fiedler blocks have 2 columns)."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    return max(1, min(2, n))
+
+
+def _upper_triangle_csc(S: sp.csc_matrix) -> sp.csc_matrix:
+    """The upper triangle (diagonal included) of a CSC matrix with sorted indices, without a COO round trip."""
+    counts = np.diff(S.indptr)
+    cols = np.repeat(np.arange(S.shape[1], dtype=S.indices.dtype), counts)
+    keep = S.indices <= cols
+    indptr = np.zeros(S.shape[1] + 1, dtype=S.indptr.dtype)
+    np.cumsum(np.bincount(cols[keep], minlength=S.shape[1]), out=indptr[1:])
+    return sp.csc_matrix((S.data[keep], S.indices[keep], indptr), shape=S.shape)
+
+
 class ShiftInvert:
     """A factorisation of ``S = Q - sigma K`` (sigma < 0, so S is SPD), solve many times.
 
@@ -266,12 +293,18 @@ class ShiftInvert:
         The shift, < 0.
     backend : {'auto', 'qdldl', 'superlu'}
         Factorisation library.
+    threads : int, optional
+        Threads for the columns of a block solve (qdldl only, at most the CPUs this process
+        may use); default 1. Use as a context manager (or call :meth:`close`) to stop them.
     """
 
-    def __init__(self, Q: sp.spmatrix, K: sp.spmatrix, sigma: float, backend: str = "auto"):
+    def __init__(self, Q: sp.spmatrix, K: sp.spmatrix, sigma: float, backend: str = "auto",
+                 threads: int | None = None):
         if not sigma < 0:
             raise ValueError(f"sigma must be negative, got {sigma}")
         self.sigma = float(sigma)
+        self.threads = 1 if threads is None else max(1, min(int(threads), _available_cpus()))
+        self._pool: ThreadPoolExecutor | None = None
         Q, K = sp.csr_matrix(Q), sp.csr_matrix(K)
         if (Q.has_canonical_format and K.has_canonical_format and np.array_equal(Q.indptr, K.indptr)
                 and np.array_equal(Q.indices, K.indices)):
@@ -286,7 +319,7 @@ class ShiftInvert:
             try:
                 import qdldl
 
-                self._qdldl = qdldl.Solver(S)
+                self._qdldl = qdldl.Solver(_upper_triangle_csc(S), upper=True)
                 self.backend = "qdldl"
                 return
             except ImportError:
@@ -297,15 +330,35 @@ class ShiftInvert:
         self.backend = "superlu"
 
     def solve(self, B: np.ndarray) -> np.ndarray:
-        """``S^{-1} B`` for B (n,) or (n, p)."""
+        """``S^{-1} B`` for B (n,) or (n, p).
+
+        With qdldl, the columns of a block are solved in up to ``threads`` threads (qdldl
+        releases the GIL and its solve allocates its own work arrays, so this is safe).
+        """
         if self.backend == "superlu":
             return self._lu.solve(np.asarray(B, dtype=np.float64))
         if B.ndim == 1:
             return self._qdldl.solve(np.ascontiguousarray(B, dtype=np.float64))
-        out = np.empty(B.shape)
-        for j in range(B.shape[1]):
-            out[:, j] = self._qdldl.solve(np.ascontiguousarray(B[:, j], dtype=np.float64))
-        return out
+        cols = [np.ascontiguousarray(B[:, j], dtype=np.float64) for j in range(B.shape[1])]
+        if self.threads > 1 and len(cols) > 1:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(max_workers=self.threads, thread_name_prefix="shift-invert")
+            xs = list(self._pool.map(self._qdldl.solve, cols))
+        else:
+            xs = [self._qdldl.solve(c) for c in cols]
+        return np.column_stack(xs)
+
+    def close(self) -> None:
+        """Stop the solve threads (if any were started)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True)
+            self._pool = None
+
+    def __enter__(self) -> "ShiftInvert":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 # --------------------------------------------------------------------------- methods
@@ -324,6 +377,45 @@ class _Raw:
 
 class _NotConverged(Exception):
     pass
+
+
+def _svqb(prob: _Problem, B: np.ndarray, KB: np.ndarray, floor: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """K-orthonormalise the columns of B (SVQB: scaled Gram matrix, eigendecomposition).
+
+    Columns whose K-norm is below ``floor`` are dropped first (numerically in the span of
+    what they were orthogonalised against), then directions with a relative eigenvalue
+    below 1e-14 of the scaled Gram matrix. Returns B, K B and that matrix's condition number.
+    """
+    G = B.T @ KB
+    norms = np.sqrt(np.maximum(np.diag(G), 0.0))
+    ok = norms > floor
+    if not ok.all():
+        B, KB, G, norms = B[:, ok], KB[:, ok], G[np.ix_(ok, ok)], norms[ok]
+    if B.shape[1] == 0:
+        return B, KB, 1.0
+    Dinv = 1.0 / norms
+    w, U = np.linalg.eigh((G + G.T) / 2 * Dinv[:, None] * Dinv[None, :])
+    keep = w > 1e-14 * w.max()
+    T = (Dinv[:, None] * U[:, keep]) / np.sqrt(w[keep])
+    return B @ T, KB @ T, float(w.max() / max(w[keep].min(), 1e-300))
+
+
+def _orthonormalize_against(prob: _Problem, Z: np.ndarray, KZ: np.ndarray, B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Columns of B made K-orthonormal and K-orthogonal to the K-orthonormal basis Z (n, m).
+
+    Block classical Gram–Schmidt twice ("twice is enough") then SVQB within the block; when
+    the block was ill-conditioned (cond > 1e6) the whole round is repeated once, so that the
+    orthogonality lost in the within-block step (~ eps * cond) is restored. Directions that
+    keep less than 1e-13 of their norm are dropped.
+    """
+    before = np.sqrt(np.einsum("ij,ij->j", B, B)) * np.sqrt(prob.d.max())  # bounds the K-norms
+    for _ in range(2):
+        B = B - Z @ (KZ.T @ B)
+    B, KB, cond = _svqb(prob, B, prob.K @ B, 1e-13 * before.max())
+    if B.shape[1] > 1 and cond > 1e6:
+        B = B - Z @ (KZ.T @ B)
+        B, KB, _ = _svqb(prob, B, prob.K @ B, 1e-3)
+    return B, KB
 
 
 def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0: np.ndarray, nev: int,
@@ -352,19 +444,9 @@ def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0:
     n_solves = 0
     res = np.full(nev, np.inf)
     for step in range(1, maxiter + 1):
-        # classical Gram–Schmidt against the basis, twice ("twice is enough"), then within the block;
-        # directions that lose all but 1e-13 of their norm are numerically in the span already
-        before = np.sqrt(np.einsum("ij,ij->", B, B))
-        for _ in range(2):
-            B = B - Z[:, :m] @ (KZ[:, :m].T @ B)
-        KB = prob.K @ B
-        G = B.T @ KB
-        w, U = np.linalg.eigh((G + G.T) / 2)
-        keep = np.sqrt(np.maximum(w, 0.0)) > 1e-13 * before * np.sqrt(prob.d.max())
-        if not keep.any():
+        B, KB = _orthonormalize_against(prob, Z[:, :m], KZ[:, :m], B)
+        if B.shape[1] == 0:
             raise _NotConverged("the Krylov space stopped growing (breakdown)")
-        T = U[:, keep] / np.sqrt(w[keep])
-        B, KB = B @ T, KB @ T
         b = B.shape[1]
         if m + b > max_basis + 1:  # thick restart on the current Ritz vectors
             keep_n = min(m - 1, max(2 * nev, max_basis // 2))
@@ -404,25 +486,26 @@ def _block_krylov(prob: _Problem, solve: Callable[[np.ndarray], np.ndarray], X0:
 
 
 def _shift_invert(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray | None, seed: int,
-                  sigma: float | None, backend: str, X0: np.ndarray | None = None) -> _Raw:
+                  sigma: float | None, backend: str, X0: np.ndarray | None = None, threads: int = 1) -> _Raw:
     p = nev + 1  # one more start vector than wanted pairs
     axis = None if V is None else _axis_functions(prob, V, p)
     sigma = _auto_shift(prob, V, axis) if sigma is None else float(sigma)
     try:
-        fac = ShiftInvert(prob.Q, prob.K, sigma, backend=backend)
+        fac = ShiftInvert(prob.Q, prob.K, sigma, backend=backend, threads=threads)
     except (RuntimeError, ValueError) as exc:  # singular factor, ...
         raise _NotConverged(f"factorisation of Q - sigma K failed ({exc})") from None
     if X0 is None:
         X0 = _start_block(prob, p, V, seed, axis=axis)
-    max_basis = int(min(prob.n - 1, max(12 * p, 40)))
-    try:
-        values, vectors, steps, n_solves = _block_krylov(prob, fac.solve, X0, nev, tol, maxiter, max_basis)
-        return _Raw(values, vectors, steps, n_solves, sigma)
-    except _NotConverged as first:
-        arpack = _arpack(prob, fac, nev, tol, V, seed)
-        if arpack is None:
-            raise first
-        return arpack
+    max_basis = int(min(prob.n - 1, max(6 * p, 40)))
+    with fac:
+        try:
+            values, vectors, steps, n_solves = _block_krylov(prob, fac.solve, X0, nev, tol, maxiter, max_basis)
+            return _Raw(values, vectors, steps, n_solves, sigma)
+        except _NotConverged as first:
+            arpack = _arpack(prob, fac, nev, tol, V, seed)
+            if arpack is None:
+                raise first
+            return arpack
 
 
 def _arpack(prob: _Problem, fac: ShiftInvert, nev: int, tol: float, V, seed: int) -> _Raw | None:
@@ -477,22 +560,33 @@ def _lobpcg(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.ndarray
     X = prob.k_orthonormalize(X)
     if X.shape[1] < p:
         X = np.column_stack([X, np.random.default_rng(seed).standard_normal((prob.n, p - X.shape[1]))])
-    est = abs(sigma) * 100.0
-    # lobpcg measures ||r||_2; ||r||_{D^-1} <= ||r||_2 / sqrt(min d): aim below our tol
-    tol2 = tol * est * np.sqrt(prob.d.min()) * 0.1
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        w, Xv, hist = sla.lobpcg(prob.Q, X, B=prob.K, M=Mop, Y=prob.c[:, None], tol=tol2, maxiter=maxiter,
-                                 largest=False, retResidualNormsHistory=True)
-    order = np.argsort(w)[:nev]
+    # lobpcg stops on ||r||_2 <= its tol; ours is ||r||_{D^-1} / theta <= tol, and
+    # ||r||_{D^-1} <= ||r||_2 / sqrt(min d). Start from a Rayleigh-quotient estimate of theta and
+    # restart (from the current vectors, with a tighter tol) while our criterion is not met.
+    est = _rayleigh_estimate(prob, X)
+    tol2 = tol * est * np.sqrt(prob.d.min())
+    iterations = 0
+    for _ in range(4):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            w, Xv, hist = sla.lobpcg(prob.Q, X, B=prob.K, M=Mop, Y=prob.c[:, None], tol=tol2, maxiter=maxiter,
+                                     largest=False, retResidualNormsHistory=True)
+        iterations += len(hist)
+        res_all = prob.residuals(Xv, w)
+        order = np.argsort(w)[:nev]
+        res = res_all[order]
+        if np.all(res <= tol) or iterations >= maxiter:
+            break
+        X = Xv
+        tol2 *= 0.5 * tol / float(res.max())
     w, Xv = w[order], Xv[:, order]
     Xv = prob.deflate(Xv)
     Xv = Xv / np.sqrt(np.einsum("ij,ij->j", Xv, prob.K @ Xv))
     res = prob.residuals(Xv, w)
     if not np.all(res <= 10 * tol):
-        raise _NotConverged(f"LOBPCG stopped after {len(hist)} iterations with residuals "
+        raise _NotConverged(f"LOBPCG stopped after {iterations} iterations with residuals "
                             f"{np.array2string(res, precision=2)} (tol {tol:g})")
-    return _Raw(w, Xv, len(hist), count[0], sigma)
+    return _Raw(w, Xv, iterations, count[0], sigma)
 
 
 def _barycentric_prolongation(V: np.ndarray, Vc: np.ndarray, Fc: np.ndarray) -> sp.csr_matrix:
@@ -600,6 +694,43 @@ def _chain(method: str, n: int, fallback: bool) -> list[str]:
     return chain
 
 
+@contextmanager
+def _blas_threads(threads: int) -> Iterator[None]:
+    """Limit the BLAS thread pool to ``threads`` inside the block (no-op without threadpoolctl)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        yield
+        return
+    with threadpool_limits(limits=max(1, int(threads)), user_api="blas"):
+        yield
+
+
+def _run_chain(prob: _Problem, nev: int, *, method: str, tol: float, maxiter: int, V, F, seed: int,
+               sigma: float | None, coarse_vertices: int, backend: str, fallback: bool,
+               threads: int) -> tuple[_Raw | None, str, list[str]]:
+    """Try the methods of :func:`_chain` in turn: (result or None, method used, failed attempts)."""
+    attempts: list[str] = []
+    for m in _chain(method, prob.n, fallback):
+        try:
+            if m == "shift_invert":
+                raw = _shift_invert(prob, nev, tol=tol, maxiter=maxiter, V=V, seed=seed, sigma=sigma,
+                                    backend=backend, threads=threads)
+                if raw.iterations == 0:
+                    m = "arpack"
+            elif m == "lobpcg":
+                raw = _lobpcg(prob, nev, tol=tol, maxiter=maxiter, V=V, seed=seed, sigma=sigma)
+            elif m == "multilevel":
+                raw = _multilevel(prob, nev, tol=tol, maxiter=maxiter, V=V, F=F, seed=seed, sigma=sigma,
+                                  coarse_vertices=coarse_vertices, backend=backend)
+            else:
+                raw = _dense(prob, nev)
+            return raw, m, attempts
+        except (_NotConverged, np.linalg.LinAlgError, RuntimeError, ImportError) as exc:
+            attempts.append(f"{m}: {exc}")
+    return None, "", attempts
+
+
 def smallest_eigenpairs(
     Q: sp.spmatrix,
     K: sp.spmatrix,
@@ -616,6 +747,7 @@ def smallest_eigenpairs(
     coarse_vertices: int = 3000,
     backend: Literal["auto", "qdldl", "superlu"] = "auto",
     fallback: bool = True,
+    threads: int = 1,
 ) -> Eigenpairs:
     """The ``k`` smallest eigenpairs of ``Q phi = lambda K phi`` (constant included).
 
@@ -647,6 +779,10 @@ def smallest_eigenpairs(
         Sparse factorisation for ``shift_invert``.
     fallback : bool
         On failure, try the other methods (module docstring).
+    threads : int
+        Threads for BLAS (limited with threadpoolctl while this function runs) and for the
+        columns of a block solve. Default 1: the pipeline runs one worker process per core,
+        and on a loaded machine more threads made the solve 2.5x slower (docs/spectral.md).
 
     Returns
     -------
@@ -669,33 +805,18 @@ def smallest_eigenpairs(
         raise ValueError(f"unknown method {method!r}")
     if not tol > 0:
         raise ValueError(f"tol must be positive, got {tol}")
+    if threads < 1:
+        raise ValueError(f"threads must be >= 1, got {threads}")
     if V is not None and np.shape(V) != (n, 3):
         raise ValueError(f"V must have shape ({n}, 3), got {np.shape(V)}")
     prob = _Problem(Q, K)
     if not np.all(prob.d > 0):
         raise ValueError("K has non-positive row sums: it is not a mass matrix of a mesh without isolated vertices")
     nev = k - 1
-    attempts: list[str] = []
-    raw: _Raw | None = None
-    used = ""
-    for m in _chain(method, n, fallback):
-        try:
-            if m == "shift_invert":
-                raw = _shift_invert(prob, nev, tol=tol, maxiter=maxiter, V=V, seed=seed, sigma=sigma,
-                                    backend=backend)
-                if raw.iterations == 0:
-                    m = "arpack"
-            elif m == "lobpcg":
-                raw = _lobpcg(prob, nev, tol=tol, maxiter=maxiter, V=V, seed=seed, sigma=sigma)
-            elif m == "multilevel":
-                raw = _multilevel(prob, nev, tol=tol, maxiter=maxiter, V=V, F=F, seed=seed, sigma=sigma,
-                                  coarse_vertices=coarse_vertices, backend=backend)
-            else:
-                raw = _dense(prob, nev)
-            used = m
-            break
-        except (_NotConverged, np.linalg.LinAlgError, RuntimeError, ImportError) as exc:
-            attempts.append(f"{m}: {exc}")
+    with _blas_threads(threads):
+        raw, used, attempts = _run_chain(prob, nev, method=method, tol=tol, maxiter=maxiter, V=V, F=F, seed=seed,
+                                         sigma=sigma, coarse_vertices=coarse_vertices, backend=backend,
+                                         fallback=fallback, threads=threads)
     if raw is None:
         raise StageError("no eigensolver converged: " + "; ".join(attempts))
     order = np.argsort(raw.values)
