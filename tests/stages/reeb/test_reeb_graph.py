@@ -9,12 +9,14 @@ from scipy.spatial.transform import Rotation
 
 from stages.morse.height import principal_height
 from stages.morse.mixture import mixture_distance
+from stages.spectral.fiedler import fiedler_function
 from stages.reeb.level_sets import band_index, level_values
 from stages.reeb.prune import make_skeleton
 from stages.reeb.reeb_graph import ROOT, reeb_graph
 
 FUNCTIONS = {
     "mixture": lambda m: mixture_distance(m.V, m.F),
+    "fiedler": lambda m: fiedler_function(m),
     "height": lambda m: principal_height(m.V),
 }
 
