@@ -35,8 +35,9 @@ def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "
     shade = face_shading(V, F)[:, None]
     if values is not None:
         v = np.asarray(values, dtype=float)[F].mean(axis=1)
-        span = np.ptp(v) or 1.0
-        base = colormaps[cmap]((v - v.min()) / span)[:, :3]
+        span = np.ptp(v)
+        t = (v - v.min()) / span if span > 1e-12 * max(np.abs(v).max(), 1e-300) else np.full_like(v, 0.5)
+        base = colormaps[cmap](t)[:, :3]
     else:
         base = np.broadcast_to(np.asarray(color, dtype=float), (len(F), 3))
     rgb = np.clip(base * shade, 0, 1)

@@ -66,7 +66,8 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
     for r, cell in zip(results, cells):
         ax = fig.add_subplot(rows, cols, cell + 1, projection="3d")
         label = Path(r.input_path).name.split(".")[0]
-        sweep = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in r.sweep.items() if k not in params.where)
+        sweep = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in r.sweep.items()
+                          if k not in params.where and k != "morse.function")
         if r.final("mesh") is None:
             ax.set_axis_off()
             ax.set_title(f"{label}\nfailed", fontsize=7, color="#b00")
@@ -195,7 +196,8 @@ def spectral_figures_report(experiment, results, params: SpectralFiguresParams) 
     from stages.spectral.eigensolver import smallest_eigenpairs
     from stages.spectral.laplacian import laplacian
 
-    items = [r for r in results if r.ok and r.final("mesh") is not None][: params.max_items]
+    unique = {r.input_path: r for r in reversed(results) if r.ok and r.final("mesh") is not None}
+    items = [unique[p] for p in dict.fromkeys(r.input_path for r in results) if p in unique][: params.max_items]
     k = max(params.eigenfunctions, 2)
     fig_spy, axes_spy = plt.subplots(len(items), 2, figsize=(7, 3.4 * len(items)), squeeze=False)
     cols = params.eigenfunctions + 1
