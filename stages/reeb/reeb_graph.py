@@ -144,9 +144,10 @@ def _partition(F: np.ndarray, f: np.ndarray, levels: np.ndarray, closed: bool) -
     n, m = len(f), len(F)
     n_bands = len(levels) - 1
     vb = band_index(f, levels)
-    tb = vb[F]
-    b0, b2 = tb.min(axis=1), tb.max(axis=1)
-    b1 = tb.sum(axis=1) - b0 - b2  # the middle band
+    t0, t1, t2 = vb[F[:, 0]], vb[F[:, 1]], vb[F[:, 2]]
+    b0 = np.minimum(np.minimum(t0, t1), t2)
+    b2 = np.maximum(np.maximum(t0, t1), t2)
+    b1 = t0 + t1 + t2 - b0 - b2  # the middle band
     # extra pieces: bands strictly between the sorted vertex bands of a triangle
     r1, k1 = _expand(b0 + 1, b1 - 1)
     r2, k2 = _expand(b1 + 1, b2 - 1)
@@ -181,10 +182,11 @@ def _partition(F: np.ndarray, f: np.ndarray, levels: np.ndarray, closed: bool) -
     referenced = np.zeros(n, dtype=bool)
     referenced[F.ravel()] = True
     ids = np.concatenate([np.flatnonzero(referenced), n + np.arange(len(x_face))])
-    used, inverse = np.unique(label[ids], return_inverse=True)
+    used = np.zeros(int(label.max(initial=-1)) + 1, dtype=bool)
+    used[label[ids]] = True  # components that hold a referenced vertex or an extra piece, renumbered
     node = np.full(n + len(x_face), -1, dtype=np.int64)
-    node[ids] = inverse
-    n_nodes = len(used)
+    node[ids] = (np.cumsum(used) - 1)[label[ids]]
+    n_nodes = int(used.sum())
     vertex_node = node[:n]
     node_band = np.zeros(n_nodes, dtype=np.int64)
     node_band[vertex_node[referenced]] = vb[referenced]
@@ -194,9 +196,11 @@ def _partition(F: np.ndarray, f: np.ndarray, levels: np.ndarray, closed: bool) -
         return node[piece_id(face, band)]
 
     # contours: (triangle, level) crossings joined through edges crossing the level
-    span1 = b2 - b0
-    c_face, c_level = _expand(b0 + 1, b2)
-    c_offset = np.cumsum(span1) - span1
+    span1 = b2[crossing] - b0[crossing]
+    rows_cf, c_level = _expand(b0[crossing] + 1, b2[crossing])
+    c_face = crossing[rows_cf]
+    c_offset = np.zeros(m, dtype=np.int64)
+    c_offset[crossing] = np.cumsum(span1) - span1
     rows_c, kc = _expand(e_lo + 1, e_hi)
     if len(c_face):
         contour = _components(len(c_face), c_offset[f1[rows_c]] + kc - b0[f1[rows_c]] - 1,
