@@ -39,6 +39,7 @@ from pipeline.params import Params
 from pipeline.registry import stage
 from pipeline.result import StageResult
 from stages.mesh.measures import bbox_diagonal
+from stages.mesh.geometry import double_areas_and_sq_lengths
 from stages.mesh.mesh import Mesh
 from stages.mesh.topology import TopologyReport, topology_report
 
@@ -164,14 +165,14 @@ def degenerate_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     Returns
     -------
     (m,) bool
-        True for faces with a repeated vertex index or a floating-point area of exactly 0.
+        True for faces with a repeated vertex index or a zero area, computed with the
+        stable Heron formula the Laplacian uses (:func:`stages.mesh.geometry.double_areas_and_sq_lengths`),
+        so that every face the Laplacian would reject as degenerate is dropped here.
     """
-    import igl
-
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     if F.shape[0] == 0:
         return repeated
-    return repeated | (igl.doublearea(V, F) == 0.0)
+    return repeated | ~(double_areas_and_sq_lengths(V, F)[1] > 0)
 
 
 def duplicate_faces(F: np.ndarray) -> np.ndarray:

@@ -612,13 +612,14 @@ def _multilevel(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.nda
     if V is None or F is None:
         raise _NotConverged("the multilevel method needs the mesh (V and F)")
     from stages.mesh.decimate import simplify_to_target
-    from stages.spectral.laplacian import _assemble, _components, _double_areas_and_sq_lengths
+    from stages.mesh.geometry import double_areas_and_sq_lengths
+    from stages.spectral.laplacian import _assemble, _components
 
     target = min(coarse_vertices, prob.n // 4)
     if target < 100:
         raise _NotConverged(f"mesh too small for multilevel ({prob.n} vertices; needs >= 400)")
     Vc, Fc, _ = simplify_to_target(V, F, 2 * target)
-    s, dbl = _double_areas_and_sq_lengths(Vc, Fc)
+    s, dbl = double_areas_and_sq_lengths(Vc, Fc)
     keep = dbl > 0
     Fc = Fc[keep]
     Qc, Kc = _assemble(Vc.shape[0], Fc, s[keep], dbl[keep])

@@ -50,6 +50,7 @@ from pipeline.errors import InputError
 from pipeline.params import Params
 from pipeline.registry import stage
 from pipeline.result import StageResult
+from stages.mesh.geometry import double_areas_and_sq_lengths
 from stages.mesh.mesh import Mesh
 
 MassType = Literal["full", "voronoi"]
@@ -86,26 +87,6 @@ class Laplacian:
         return np.asarray(self.K.sum(axis=1)).ravel()
 
 
-def _double_areas_and_sq_lengths(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Squared edge lengths (m, 3) (column k: edge opposite corner k) and double areas (m,).
-
-    The double area uses Kahan's stable Heron formula on the sorted edge lengths, as
-    libigl's ``doublearea`` from edge lengths does; a negative radicand (round-off on a
-    degenerate triangle) gives 0.
-    """
-    X = np.ascontiguousarray(V.T)[:, F]  # (3, m, 3): coordinate, triangle, corner
-    s = np.empty((F.shape[0], 3))
-    for k, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):  # the edge opposite corner k
-        e = X[:, :, i] - X[:, :, j]
-        s[:, k] = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
-    l = np.sqrt(s)
-    l0, l1, l2 = l[:, 0], l[:, 1], l[:, 2]
-    a = np.maximum(np.maximum(l0, l1), l2)
-    c = np.minimum(np.minimum(l0, l1), l2)
-    b = (l0 + l1 + l2) - a - c
-    radicand = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
-    dbl = 0.5 * np.sqrt(np.maximum(radicand, 0.0))
-    return s, dbl
 
 
 def cotangent_and_full_mass(V: np.ndarray, F: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
@@ -126,7 +107,7 @@ def cotangent_and_full_mass(V: np.ndarray, F: np.ndarray) -> tuple[sp.csr_matrix
     """
     V = np.asarray(V, dtype=np.float64)
     F = np.asarray(F, dtype=np.int64)
-    return _assemble(V.shape[0], F, *_double_areas_and_sq_lengths(V, F))
+    return _assemble(V.shape[0], F, *double_areas_and_sq_lengths(V, F))
 
 
 def _assemble(n: int, F: np.ndarray, s: np.ndarray, dbl: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
@@ -228,7 +209,7 @@ def laplacian(mesh: Mesh, mass: MassType = "full", *, require_connected: bool = 
         raise ValueError(f"mass must be 'full' or 'voronoi', got {mass!r}")
     check_mesh(mesh)
     V, F = mesh.V, mesh.F
-    sq, dbl = _double_areas_and_sq_lengths(V, F)
+    sq, dbl = double_areas_and_sq_lengths(V, F)
     zero = ~(dbl > 0)
     if zero.any():
         raise InputError(mesh.name, f"{int(zero.sum())} triangles have zero area (collinear vertices): infinite "

@@ -1,0 +1,27 @@
+"""Triangle geometry shared by the stages that must agree on it (clean, Laplacian)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def double_areas_and_sq_lengths(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Squared edge lengths (m, 3) (column k: edge opposite corner k) and double areas (m,).
+
+    The double area uses Kahan's stable Heron formula on the sorted edge lengths, as
+    libigl's ``doublearea`` from edge lengths does; a negative radicand (round-off on a
+    degenerate triangle) gives 0.
+    """
+    X = np.ascontiguousarray(V.T)[:, F]  # (3, m, 3): coordinate, triangle, corner
+    s = np.empty((F.shape[0], 3))
+    for k, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):  # the edge opposite corner k
+        e = X[:, :, i] - X[:, :, j]
+        s[:, k] = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
+    l = np.sqrt(s)
+    l0, l1, l2 = l[:, 0], l[:, 1], l[:, 2]
+    a = np.maximum(np.maximum(l0, l1), l2)
+    c = np.minimum(np.minimum(l0, l1), l2)
+    b = (l0 + l1 + l2) - a - c
+    radicand = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
+    dbl = 0.5 * np.sqrt(np.maximum(radicand, 0.0))
+    return s, dbl
