@@ -272,7 +272,7 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     )
 
 
-@stage("clean", params=CleanParams, version=1, consumes=("mesh",), produces=("mesh",))
+@stage("clean", params=CleanParams, version=2, consumes=("mesh",), produces=("mesh",))
 def clean(mesh: Mesh, *, params: CleanParams) -> CleanResult:
     """Merge duplicate vertices, drop unreferenced vertices, degenerate and duplicated faces; report topology."""
     return clean_mesh(mesh, params)
