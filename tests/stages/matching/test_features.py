@@ -56,13 +56,17 @@ def test_root_without_root_node_is_nearest_to_area_centroid():
     assert skeleton_root(G) == 1
 
 
+@pytest.mark.parametrize("function", ["mixture", "fiedler"])
 @pytest.mark.parametrize("name", ["odedstein_hand_closed.obj.gz", "odedstein_cat-low-resolution.obj.gz"])
-def test_features_invariant_to_similarity(bundled_mesh, name):
+def test_features_invariant_to_similarity(bundled_mesh, name, function):
+    from stages.mesh.mesh import Mesh
+    from stages.spectral.fiedler import fiedler_function
+
     m = bundled_mesh(name)
     R = Rotation.from_rotvec([0.3, -1.1, 0.4]).as_matrix()
 
     def feats(V):
-        mf = mixture_distance(V, m.F)
+        mf = mixture_distance(V, m.F) if function == "mixture" else fiedler_function(Mesh(V, m.F))
         S = make_skeleton(reeb_graph(V, m.F, mf.values, level_values(mf.values, 22), root=mf.root), 0.01)
         return endpoint_features(S.graph).features
 
