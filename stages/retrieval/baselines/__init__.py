@@ -10,7 +10,7 @@ module                        descriptor                               shape    
 :mod:`.d2`                    D2 shape distribution (Osada 2002)       (bins,) = (64,)     L1
 :mod:`.spherical_harmonics`   rotation-invariant SH (Kazhdan 2003)     (radii, L+1)        L2
                                                                        = (32, 17)
-:mod:`.shapedna`              ShapeDNA (Reuter 2006)                   (k,) = (30,)        L2
+:mod:`.shapedna`              ShapeDNA (Reuter 2006), lambda_i A / i   (k,) = (30,)        L2
 ============================  =======================================  ==================  ========
 
 :data:`BASELINES` maps a short name to a :class:`Baseline` record for wiring into stages

@@ -188,9 +188,11 @@ def test_sh_params_are_validated():
 
 def test_shapedna_of_the_unit_sphere(sphere):
     # lambda = l (l + 1) with multiplicity 2l + 1; times the area 4 pi
-    x = shapedna.descriptor(sphere, shapedna.ShapeDNAParams(k=24))
+    x = shapedna.descriptor(sphere, shapedna.ShapeDNAParams(k=24, normalization="area"))
     expected = 4 * np.pi * np.repeat([2, 6, 12, 20], [3, 5, 7, 9])
     np.testing.assert_allclose(x, expected, rtol=0.01)  # linear FEM: +0.02 % (l = 1) to +0.7 % (l = 4)
+    default = shapedna.descriptor(sphere, shapedna.ShapeDNAParams(k=24))  # lambda_i * A / i
+    np.testing.assert_allclose(default, x / np.arange(1, 25), rtol=1e-9)
     # the multiplicity pattern: within a group the values agree to 1e-6, between groups they jump
     groups = np.split(x, np.cumsum([3, 5, 7])[:])
     for g in groups:
