@@ -47,7 +47,7 @@ def torus():
 
 @pytest.fixture(scope="module")
 def sphere():
-    from conftest import icosphere
+    from shapes import icosphere
 
     return icosphere(4)  # 2,562 vertices, 5,120 faces, on the unit sphere
 
@@ -67,7 +67,7 @@ def test_samples_are_uniform_on_a_square():
 
 
 def test_exact_centroid_and_rms_radius(sphere):
-    from conftest import unit_cube
+    from shapes import unit_cube
 
     c, rms = area_centroid_and_rms_radius(unit_cube().V, unit_cube().F)
     np.testing.assert_allclose(c, [0.5, 0.5, 0.5], atol=1e-15)
@@ -201,7 +201,7 @@ def test_shapedna_of_the_unit_sphere(sphere):
 
 
 def test_shapedna_drops_one_zero_per_component(sphere):
-    from conftest import disjoint_union, icosphere
+    from shapes import disjoint_union, icosphere
 
     two = disjoint_union(icosphere(3), icosphere(3), offsets=[(0, 0, 0), (5, 0, 0)])
     raw = shapedna.descriptor(two, shapedna.ShapeDNAParams(k=7, normalization="none"))
