@@ -41,6 +41,7 @@ STAGE_MODULES: tuple[str, ...] = (
     "stages.retrieval.baseline_stages",
     "pipeline.reports",
     "pipeline.skeleton_reports",
+    "pipeline.retrieval_reports",
 )
 
 
