@@ -62,6 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     from pipeline.skeleton_cli import add_parser as add_skeleton
 
     add_skeleton(sub)
+    from pipeline.register_cli import add_parser as add_register
+
+    add_register(sub)
     add_retrieval(sub)
     return parser
 

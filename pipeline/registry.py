@@ -37,11 +37,18 @@ STAGE_MODULES: tuple[str, ...] = (
     "stages.reeb.reeb_graph",
     "stages.reeb.prune",
     "stages.crosscheck.libigl_reference",
+    "stages.registration.io",
+    "stages.registration.misalign",
+    "stages.registration.register",
+    "stages.registration.simpleitk_reference",
+    "stages.registration.evaluate",
+    "stages.registration.landscape",
     "stages.retrieval.descriptor",
     "stages.retrieval.baseline_stages",
     "pipeline.reports",
     "pipeline.skeleton_reports",
     "pipeline.retrieval_reports",
+    "pipeline.registration_reports",
 )
 
 

@@ -1,0 +1,462 @@
+"""Reports of the registration experiments (thesis ch. 2): figures and tables.
+
+- ``bernoulli_entropy`` (Fig. 2.2) and ``bernoulli_jt`` (Fig. 2.3): analytic curves, no items needed;
+- ``conditional_distributions`` (Figs. 2.4-2.5): rows of the joint histogram of an image and the
+  same image moved by a few transforms;
+- ``registration_bars`` (Figs. 2.6-2.8): recovered parameters and errors per measure, per true
+  misalignment, one figure per reference image;
+- ``landscape_plot`` (Figs. 2.9-2.15): the measure along each parameter, one line per alpha;
+- ``registration_overlay``: fixed, moving, checkerboards before/after and a colour overlay;
+- ``registration_table``: one row per item and registration method (estimate, truth, errors, time);
+- ``accuracy_summary``: success rate, median error and time per method (and per input pair).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+from pydantic import Field
+
+from pipeline.params import Params
+from pipeline.reports import ReportOutput, report
+
+_NAME = dict(pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure or table")
+
+
+def _stem(path: str) -> str:
+    name = Path(str(path).split("|")[0]).name
+    for suffix in (".nii.gz", ".png", ".tif", ".tiff", ".nii", ".mha", ".mhd", ".dcm"):
+        name = name.removesuffix(suffix)
+    return name
+
+
+def _label(r) -> str:
+    """Short input label of an item: 'fixed|moving' stems for pairs, the stem for images."""
+    text = r.input_label or r.input_path
+    parts = [_stem(p) for p in str(text).split("|")]
+    return "|".join(parts)
+
+
+def _of_type(r, type_name: str) -> list[tuple[str, Any]]:
+    """(stage label, result) of every result of the given class name in an item, in chain order."""
+    return [(label, res) for label, res in r.results.items() if type(res).__name__ == type_name]
+
+
+# --------------------------------------------------------------------------- Figs. 2.2-2.3
+
+
+class BernoulliEntropyParams(Params):
+    name: str = Field("fig2_2_tsallis_entropy", **_NAME)
+    alphas: list[float] = Field(default_factory=lambda: [0.3, 0.5, 1.0, 1.5, 2.0, 3.0], min_length=1,
+                                description="entropy orders (1 is Shannon)")
+
+
+@report("bernoulli_entropy", params=BernoulliEntropyParams)
+def bernoulli_entropy_report(experiment, results, params: BernoulliEntropyParams) -> ReportOutput:
+    """Fig. 2.2: Tsallis entropy of a Bernoulli distribution (p, 1 - p) for several alpha."""
+    import matplotlib.pyplot as plt
+
+    from stages.registration.divergence import tsallis_entropy
+
+    p = np.linspace(0, 1, 401)
+    P = np.column_stack([p, 1 - p])
+    fig, ax = plt.subplots(figsize=(5.2, 3.8))
+    rows = []
+    for alpha in params.alphas:
+        h = tsallis_entropy(P, alpha, axis=1)
+        ax.plot(p, h, label=f"alpha = {alpha:g}" + (" (Shannon)" if alpha == 1 else ""))
+        rows.append({"alpha": alpha, "max": float(h.max()), "argmax_p": float(p[np.argmax(h)]),
+                     "max_exact": float((2 ** (1 - alpha) - 1) / (1 - alpha)) if alpha != 1 else math.log(2)})
+    ax.set_xlabel("p")
+    ax.set_ylabel("H_alpha(p, 1 - p)")
+    ax.set_title("Tsallis entropy of a Bernoulli distribution (thesis Fig. 2.2)", fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    return ReportOutput(tables={params.name: rows}, figures={params.name: fig})
+
+
+class BernoulliJTParams(Params):
+    name: str = Field("fig2_3_jensen_tsallis", **_NAME)
+    alphas: list[float] = Field(default_factory=lambda: [0.3, 1.2], min_length=1, description="entropy orders")
+    points: int = Field(101, ge=5, le=1001, description="grid points per axis")
+
+
+@report("bernoulli_jt", params=BernoulliJTParams)
+def bernoulli_jt_report(experiment, results, params: BernoulliJTParams) -> ReportOutput:
+    """Fig. 2.3: Jensen-Tsallis divergence of two Bernoulli distributions, equal weights (surface and contours)."""
+    import matplotlib.pyplot as plt
+
+    from stages.registration.divergence import tsallis_entropy
+
+    g = np.linspace(0, 1, params.points)
+    p, q = np.meshgrid(g, g, indexing="ij")
+    P1 = np.stack([p, 1 - p], axis=-1)
+    P2 = np.stack([q, 1 - q], axis=-1)
+    n = len(params.alphas)
+    fig = plt.figure(figsize=(4.6 * n, 8))
+    rows = []
+    for k, alpha in enumerate(params.alphas):
+        jt = tsallis_entropy(0.5 * (P1 + P2), alpha) - 0.5 * (tsallis_entropy(P1, alpha) + tsallis_entropy(P2, alpha))
+        ax = fig.add_subplot(2, n, k + 1, projection="3d")
+        ax.plot_surface(p, q, jt, cmap="viridis", linewidth=0, antialiased=True)
+        ax.set_xlabel("p")
+        ax.set_ylabel("q")
+        ax.set_title(f"JT, alpha = {alpha:g}", fontsize=9)
+        ax2 = fig.add_subplot(2, n, n + k + 1)
+        cs = ax2.contour(p, q, jt, levels=12, cmap="viridis")
+        ax2.clabel(cs, fontsize=6)
+        ax2.set_xlabel("p")
+        ax2.set_ylabel("q")
+        ax2.set_aspect("equal")
+        rows.append({"alpha": alpha, "max": float(jt.max()), "at_p": float(p.flat[np.argmax(jt)]),
+                     "at_q": float(q.flat[np.argmax(jt)]), "min_on_diagonal": float(np.abs(np.diag(jt)).max())})
+    fig.suptitle("Jensen-Tsallis divergence of (p, 1-p) and (q, 1-q), equal weights (thesis Fig. 2.3): "
+                 "0 on p = q, largest for opposite one-hot distributions", fontsize=9)
+    fig.tight_layout()
+    return ReportOutput(tables={params.name: rows}, figures={params.name: fig})
+
+
+# --------------------------------------------------------------------------- Figs. 2.4-2.5
+
+
+class ConditionalParams(Params):
+    name: str = Field("fig2_4_conditionals", **_NAME)
+    transforms: list[tuple[float, float, float]] = Field(
+        default_factory=lambda: [(0, 0, 0), (2, 0, 0), (0, 0, 5), (5, 0, -15)], min_length=1,
+        description="(tx, ty, angle) of the moved copies (ITK convention)")
+    bins: int = Field(32, ge=2, le=256, description="histogram bins")
+    alpha: float = Field(2.0, gt=0, description="order of the JT value shown")
+    rows_shown: int = Field(6, ge=1, description="conditional distributions drawn as curves")
+
+
+@report("conditional_distributions", params=ConditionalParams)
+def conditional_distributions_report(experiment, results, params: ConditionalParams) -> ReportOutput:
+    """Figs. 2.4-2.5: conditional distributions p_i of an image against itself moved by a few transforms."""
+    import matplotlib.pyplot as plt
+
+    from stages.registration.divergence import conditionals, jensen_tsallis_histogram
+    from stages.registration.histogram import Binning, JointHistogram
+
+    figures, table = {}, []
+    for r in results:
+        image = r.final("image") if r.final("image") is not None else r.final("fixed")
+        if image is None:
+            continue
+        binning = Binning.of(image.data, params.bins)
+        jh = JointHistogram(image.data, image.data, binning, binning, center=image.center, interpolation="bilinear")
+        n = len(params.transforms)
+        fig, axes = plt.subplots(2, n, figsize=(3.3 * n, 6.2), squeeze=False)
+        for k, theta in enumerate(params.transforms):
+            h, _ = jh(np.array(theta, dtype=float))
+            P, w = conditionals(h)
+            jt = jensen_tsallis_histogram(h, params.alpha)
+            full = np.zeros_like(h)
+            rows_kept = h.sum(axis=1) > 0
+            full[rows_kept] = P
+            ax = axes[0][k]
+            ax.imshow(full, cmap="magma", aspect="auto", origin="lower", vmin=0, vmax=1)
+            ax.set_title(f"theta = {tuple(float(t) for t in theta)}\nJT(alpha={params.alpha:g}) = {jt:.3f}", fontsize=8)
+            ax.set_xlabel("target bin j")
+            ax.set_ylabel("reference bin i")
+            ax = axes[1][k]
+            top = np.argsort(w)[::-1][: params.rows_shown]
+            for i in sorted(top):
+                ax.plot(P[i], lw=1)
+            ax.set_xlabel("target bin j")
+            ax.set_ylabel("p_ij")
+            ax.set_ylim(0, 1.02)
+            ax.set_title(f"{len(top)} most frequent rows", fontsize=8)
+            table.append({"input": _label(r), "tx": theta[0], "ty": theta[1], "angle": theta[2], "jt": jt,
+                          "mean_row_max": float((w * P.max(axis=1)).sum())})
+        fig.suptitle(f"{_label(r)}: conditional distributions of the reference bins (rows of the joint histogram); "
+                     f"crisp when aligned, dispersed when not (thesis Figs. 2.4-2.5)", fontsize=9)
+        fig.tight_layout()
+        figures[f"{params.name}_{_stem(r.input_path)}"] = fig
+    return ReportOutput(tables={params.name: table}, figures=figures)
+
+
+# --------------------------------------------------------------------------- Figs. 2.6-2.8
+
+
+class BarsParams(Params):
+    name: str = Field("fig2_6_recovered", **_NAME)
+
+
+@report("registration_bars", params=BarsParams)
+def registration_bars_report(experiment, results, params: BarsParams) -> ReportOutput:
+    """Figs. 2.6-2.8: recovered parameters and absolute errors per measure, per true misalignment and image."""
+    import matplotlib.pyplot as plt
+
+    data: dict[str, dict[tuple, dict[str, tuple]]] = {}
+    for r in results:
+        if not r.ok:
+            continue
+        for _, ev in _of_type(r, "EvaluateResult"):
+            t = (ev.truth["tx"], ev.truth["ty"], ev.truth["angle"])
+            est = (t[0] + ev.d_tx, t[1] + ev.d_ty, t[2] + ev.d_angle)
+            data.setdefault(_label(r), {}).setdefault(tuple(round(v, 6) for v in t), {})[ev.method] = (t, est, ev)
+    figures, table = {}, []
+    names = ("tx", "ty", "angle")
+    for image, cases in data.items():
+        cols = len(cases)
+        fig, axes = plt.subplots(2, cols, figsize=(4.4 * cols, 6.4), squeeze=False)
+        for c, (key, by_method) in enumerate(cases.items()):
+            methods = list(by_method)
+            width = 0.8 / max(len(methods), 1)
+            x = np.arange(3)
+            truth = next(iter(by_method.values()))[0]
+            for m, method in enumerate(methods):
+                t, est, ev = by_method[method]
+                errs = [abs(e - v) for e, v in zip(est, t)]
+                label = method.split("/")[-1].split("(")[0].upper()
+                axes[0][c].bar(x + (m - (len(methods) - 1) / 2) * width, est, width, label=label)
+                axes[1][c].bar(x + (m - (len(methods) - 1) / 2) * width, errs, width, label=label)
+                table.append({"input": image, "true_tx": t[0], "true_ty": t[1], "true_angle": t[2], "method": method,
+                              "tx": est[0], "ty": est[1], "angle": est[2], "err_tx": errs[0], "err_ty": errs[1],
+                              "err_angle": errs[2], "tre_mean": ev.tre_mean, "success": ev.success})
+            for j in range(3):
+                axes[0][c].hlines(truth[j], j - 0.45, j + 0.45, colors="k", linestyles="--", lw=1)
+            axes[0][c].set_xticks(x, names)
+            axes[1][c].set_xticks(x, [f"|{n} err|" for n in names])
+            axes[0][c].set_title(f"true theta = ({truth[0]:g}, {truth[1]:g}, {truth[2]:g}) (dashed)", fontsize=8)
+            axes[1][c].set_yscale("log")
+            axes[1][c].set_ylim(1e-4, 100)
+            axes[1][c].axhline(1.0, color="0.5", lw=0.6)
+        axes[0][0].set_ylabel("recovered (px, px, deg)")
+        axes[1][0].set_ylabel("absolute error (log)")
+        axes[0][-1].legend(fontsize=7)
+        fig.suptitle(f"{image}: recovered parameters and errors per measure (thesis Figs. 2.6-2.8)", fontsize=9)
+        fig.tight_layout()
+        figures[f"{params.name}_{image.replace('|', '_')}"] = fig
+    return ReportOutput(tables={params.name: table}, figures=figures)
+
+
+# --------------------------------------------------------------------------- Figs. 2.9-2.15
+
+
+class LandscapePlotParams(Params):
+    name: str = Field("landscapes", **_NAME)
+    normalize: Literal["max", "none"] = Field("max", description="divide each curve by its maximum, or not")
+    where: dict[str, float | int | str | bool] = Field(default_factory=dict,
+                                                       description="only items with these sweep values")
+    title: str = ""
+
+
+@report("landscape_plot", params=LandscapePlotParams)
+def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> ReportOutput:
+    """Figs. 2.9-2.15: the measure against each parameter, one line per alpha, one row per item."""
+    import matplotlib.pyplot as plt
+
+    rows = [(r, res) for r in results if all(r.sweep.get(k) == v for k, v in params.where.items())
+            for _, res in _of_type(r, "LandscapeResult")]
+    if not rows:
+        return ReportOutput(notes=["no landscape results"])
+    fig, axes = plt.subplots(len(rows), 3, figsize=(13, 2.9 * len(rows)), squeeze=False)
+    table = []
+    for k, (r, res) in enumerate(rows):
+        for j, name in enumerate(("tx", "ty", "angle")):
+            ax = axes[k][j]
+            for a, alpha in enumerate(res.alphas):
+                v = res.values[name][a]
+                scale = np.nanmax(v) if params.normalize == "max" and np.nanmax(v) > 0 else 1.0
+                ax.plot(res.offsets[name] + res.center[j], v / scale, label=f"alpha = {alpha:g}")
+                sharp = float(np.nanmean(v) / np.nanmax(v)) if np.nanmax(v) > 0 else float("nan")
+                table.append({"input": _label(r), "measure": res.label, "parameter": name, "alpha": alpha,
+                              "peak_at": float(res.offsets[name][int(np.nanargmax(v))] + res.center[j]),
+                              "max": float(np.nanmax(v)), "mean_over_max": sharp})
+            ax.set_xlabel(name + (" (deg)" if name == "angle" else " (px)"))
+            ax.grid(alpha=0.3)
+            if j == 0:
+                ax.set_ylabel(("value / max" if params.normalize == "max" else "value") + f"\n{res.label}", fontsize=8)
+            ax.set_title(f"{_label(r)}", fontsize=8)
+        axes[k][-1].legend(fontsize=7)
+    if params.title:
+        fig.suptitle(params.title, fontsize=10)
+    fig.tight_layout()
+    return ReportOutput(tables={params.name: table}, figures={params.name: fig})
+
+
+# --------------------------------------------------------------------------- overlays
+
+
+def checkerboard(a: np.ndarray, b: np.ndarray, tiles: int = 8) -> np.ndarray:
+    """Alternate square tiles of two images of the same shape (each scaled to [0, 1])."""
+    H, W = a.shape
+    s = max(1, min(H, W) // tiles)
+    rows, cols = np.mgrid[0:H, 0:W]
+    mask = ((rows // s) + (cols // s)) % 2 == 0
+    return np.where(mask, _unit(a), _unit(b))
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    lo, hi = float(np.min(x)), float(np.max(x))
+    return (x - lo) / (hi - lo) if hi > lo else np.zeros_like(x)
+
+
+def overlay_rgb(fixed: np.ndarray, moving: np.ndarray) -> np.ndarray:
+    """Fixed in magenta, moving in green: grey where they agree."""
+    f, m = _unit(fixed), _unit(moving)
+    return np.clip(np.stack([f, m, f], axis=-1), 0, 1)
+
+
+def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
+    """Five panels on ``axes``: fixed, moving, checkerboard before, checkerboard after, colour overlay after."""
+    from stages.registration.interpolation import resample
+    from stages.registration.transform import RigidTransform
+
+    identity = RigidTransform.for_image(fixed.shape)
+    before = resample(moving, identity.with_center(fixed.center), fixed.shape)
+    after = resample(moving, registration.transform, fixed.shape)
+    panels = [(fixed.data, "fixed"), (moving.data, "moving"), (checkerboard(fixed.data, before), "checkerboard before"),
+              (checkerboard(fixed.data, after), "checkerboard after"), (overlay_rgb(fixed.data, after),
+                                                                        "after: fixed magenta, moving green")]
+    for ax, (img, label) in zip(axes, panels):
+        ax.imshow(img, cmap="gray" if img.ndim == 2 else None, interpolation="nearest")
+        ax.set_title(label, fontsize=8)
+        ax.set_axis_off()
+    t = registration.transform
+    flag = "" if registration.ok else "  FLAGGED: " + registration.reason[:80]
+    axes[0].text(0, -0.18, f"{title}  {registration.method}: tx={t.tx:.2f} ty={t.ty:.2f} angle={t.angle:.2f} "
+                           f"({registration.seconds:.2f} s){flag}", transform=axes[0].transAxes, fontsize=8,
+                 color="#b00" if flag else "k")
+
+
+def overlay_figure(fixed, moving, registration, title: str = ""):
+    """A one-row figure of :func:`draw_overlay`."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 5, figsize=(16, 3.9))
+    draw_overlay(axes, fixed, moving, registration, title)
+    fig.subplots_adjust(left=0.01, right=0.99, top=0.9, bottom=0.12, wspace=0.05)
+    return fig
+
+
+class OverlayParams(Params):
+    name: str = Field("overlays", **_NAME)
+    max_items: int = Field(12, ge=1, description="draw at most this many items")
+    method: str = Field("", description="only registrations whose method contains this text (default: the last one)")
+
+
+@report("registration_overlay", params=OverlayParams)
+def registration_overlay_report(experiment, results, params: OverlayParams) -> ReportOutput:
+    """Fixed, moving, checkerboards before/after and a colour overlay after registration, per item."""
+    import matplotlib.pyplot as plt
+
+    chosen = []
+    for r in results:
+        if not r.ok or r.final("fixed") is None:
+            continue
+        regs = [res.registration for _, res in r.results.items() if hasattr(res, "registration")
+                and params.method in res.registration.method]
+        if regs:
+            chosen.append((r, regs[-1]))
+    chosen = chosen[: params.max_items]
+    if not chosen:
+        return ReportOutput(notes=["no registered items to draw"])
+    fig, axes = plt.subplots(len(chosen), 5, figsize=(16, 3.9 * len(chosen)), squeeze=False)
+    for k, (r, reg) in enumerate(chosen):
+        draw_overlay(axes[k], r.final("fixed"), r.final("moving"), reg, title=_label(r))
+    fig.subplots_adjust(left=0.01, right=0.99, top=0.95, bottom=0.05, wspace=0.05, hspace=0.3)
+    return ReportOutput(figures={params.name: fig})
+
+
+# --------------------------------------------------------------------------- tables
+
+
+class RegistrationTableParams(Params):
+    name: str = Field("registrations", **_NAME)
+
+
+@report("registration_table", params=RegistrationTableParams)
+def registration_table_report(experiment, results, params: RegistrationTableParams) -> ReportOutput:
+    """One row per item and registration method: estimate, truth, errors, TRE, self-check, time."""
+    rows = []
+    for r in results:
+        evals = [res for _, res in _of_type(r, "EvaluateResult")]
+        regs = [res.registration for _, res in r.results.items() if hasattr(res, "registration")]
+        for k, reg in enumerate(regs):
+            ev = next((e for e in evals if e.method == reg.method), None)
+            t = reg.transform
+            row = {"item": r.item_id, "input": _label(r), "method": reg.method, "tx": t.tx, "ty": t.ty,
+                   "angle": t.angle}
+            if ev is not None:
+                row.update({"true_tx": ev.truth["tx"], "true_ty": ev.truth["ty"], "true_angle": ev.truth["angle"],
+                            "d_tx": ev.d_tx, "d_ty": ev.d_ty, "d_angle": ev.d_angle, "tre_mean": ev.tre_mean,
+                            "tre_max": ev.tre_max, "success": ev.success})
+            row.update({"ok": reg.ok, "reason": reg.reason, "iterations": reg.iterations,
+                        "evaluations": reg.evaluations, "seconds": reg.seconds})
+            rows.append(row)
+        if not r.ok:
+            rows.append({"item": r.item_id, "input": _label(r), "method": "", "ok": False, "reason": r.error})
+    return ReportOutput(tables={params.name: rows})
+
+
+class AccuracyParams(Params):
+    name: str = Field("accuracy", **_NAME)
+    threshold: float = Field(1.0, gt=0, description="success: mean TRE at most this (pixels)")
+
+
+def accuracy_rows(evaluations: list[tuple[str, Any]], threshold: float) -> list[dict[str, Any]]:
+    """Summary rows per (group, method) from (group, EvaluateResult) pairs, plus an 'all' group per method."""
+    groups: dict[tuple[str, str], list] = {}
+    for group, ev in evaluations:
+        groups.setdefault((group, ev.method), []).append(ev)
+        groups.setdefault(("all", ev.method), []).append(ev)
+    rows = []
+    for (group, method), evs in sorted(groups.items(), key=lambda kv: (kv[0][0] != "all", kv[0][0], kv[0][1])):
+        tre = np.array([e.tre_mean for e in evs])
+        secs = np.array([e.seconds for e in evs])
+        success = tre <= threshold
+        flagged = np.array([e.flagged for e in evs])
+        rows.append({"pairs": group, "method": method, "cases": len(evs), "success_rate": float(success.mean()),
+                     "median_tre": float(np.median(tre)), "p90_tre": float(np.percentile(tre, 90)),
+                     "max_tre": float(tre.max()), "median_seconds": float(np.median(secs)),
+                     "mean_seconds": float(secs.mean()), "flagged": int(flagged.sum()),
+                     "failed_and_flagged": int((~success & flagged).sum()),
+                     "failed_unflagged": int((~success & ~flagged).sum()),
+                     "ok_but_flagged": int((success & flagged).sum())})
+    return rows
+
+
+@report("accuracy_summary", params=AccuracyParams)
+def accuracy_summary_report(experiment, results, params: AccuracyParams) -> ReportOutput:
+    """Success rate (mean TRE <= threshold), median TRE and time per method, per input pair and overall.
+
+    A registration repeated across sweep points of a later stage (same pair, method and truth) counts once.
+    """
+    import matplotlib.pyplot as plt
+
+    evaluations, seen = [], set()
+    for r in results:
+        for _, ev in _of_type(r, "EvaluateResult"):
+            # a stage before a swept one (e.g. SimpleITK before register.metric) repeats per sweep point: count once
+            key = (_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values()))
+            if key not in seen:
+                seen.add(key)
+                evaluations.append((_label(r), ev))
+    if not evaluations:
+        return ReportOutput(notes=["no evaluate results"])
+    rows = accuracy_rows(evaluations, params.threshold)
+    methods = sorted({ev.method for _, ev in evaluations})
+    fig, axes = plt.subplots(1, 2, figsize=(12, 0.6 * len(methods) + 2.4))
+    for k, method in enumerate(methods):
+        tre = np.array([ev.tre_mean for _, ev in evaluations if ev.method == method])
+        secs = np.array([ev.seconds for _, ev in evaluations if ev.method == method])
+        jitter = (np.random.default_rng(k).random(len(tre)) - 0.5) * 0.35
+        axes[0].scatter(np.clip(tre, 1e-3, 1e3), k + jitter, s=9, alpha=0.6)
+        axes[1].scatter(secs, k + jitter, s=9, alpha=0.6)
+        axes[0].text(1.5e3, k, f"{(tre <= params.threshold).mean():.0%}", va="center", fontsize=8)
+    for ax in axes:
+        ax.set_yticks(range(len(methods)), methods, fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[0].set_xscale("log")
+    axes[0].set_xlim(1e-3, 1e4)
+    axes[0].axvline(params.threshold, color="r", lw=0.8)
+    axes[0].set_xlabel("mean target registration error (px, log); success rate on the right")
+    axes[1].set_xlabel("seconds per registration")
+    fig.tight_layout()
+    return ReportOutput(tables={params.name: rows}, figures={params.name: fig})

@@ -1,0 +1,125 @@
+"""The registration objective: a similarity measure of the joint histogram as a function of the
+transform parameters, at one or several resolutions.
+
+``Objective(theta)`` with ``theta = (tx, ty, angle)`` (ITK convention, full-resolution pixels and
+degrees) returns the measure of :mod:`stages.registration.divergence` on the joint histogram of
+``(fixed(x), moving(T(x)))`` over the fixed samples whose ``T(x)`` lies inside the moving image.
+If fewer than ``min_overlap`` of the fixed samples land inside, it returns ``-inf`` (an invalid
+transform, as in DIPY: the optimisers treat it as "do not go there") instead of a measure computed
+on a sliver of the images.
+
+:func:`build_pyramid` makes one :class:`Objective` per pyramid level (block-averaged images,
+factor f), all in full-resolution parameter units.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from stages.registration.divergence import Metric, Weights, similarity
+from stages.registration.histogram import Binning, Interpolation, JointHistogram
+from stages.registration.image import Image
+from stages.registration.interpolation import downsample
+
+
+class Objective:
+    """Similarity of fixed and transformed moving image at one resolution (callable on theta).
+
+    Parameters
+    ----------
+    histogram : JointHistogram
+    metric : {'jt', 'jr', 'mi', 'tmi'}
+    alpha : float
+        Order of the Tsallis / Renyi entropies (jt, jr, tmi).
+    weights : {'histogram', 'uniform'}
+        Weights of the Jensen divergences (jt, jr).
+    tmi_form : {'additive', 'relative'}
+    min_overlap : float
+        Smallest accepted fraction of fixed samples inside the moving image.
+    """
+
+    def __init__(self, histogram: JointHistogram, metric: Metric = "jt", *, alpha: float = 2.0,
+                 weights: Weights = "histogram", tmi_form: Literal["additive", "relative"] = "additive",
+                 min_overlap: float = 0.25):
+        self.histogram = histogram
+        self.metric, self.alpha, self.weights, self.tmi_form = metric, float(alpha), weights, tmi_form
+        self.min_overlap = float(min_overlap)
+        self.n_evals = 0
+
+    @property
+    def factor(self) -> int:
+        return self.histogram.factor
+
+    def overlap(self, theta) -> float:
+        """Fraction of fixed samples whose ``T(x)`` lies inside the moving image."""
+        u, v = self.histogram.positions(theta)
+        Hm, Wm = self.histogram.moving.shape
+        return float(np.mean((u >= 0) & (u <= Wm - 1) & (v >= 0) & (v <= Hm - 1)))
+
+    def __call__(self, theta) -> float:
+        self.n_evals += 1
+        h, n_inside = self.histogram(theta)
+        if n_inside < self.min_overlap * self.histogram.n_samples or n_inside == 0:
+            return -math.inf
+        value = similarity(h, self.metric, alpha=self.alpha, weights=self.weights, tmi_form=self.tmi_form)
+        return value if math.isfinite(value) else -math.inf
+
+
+@dataclass(frozen=True)
+class Level:
+    """One pyramid level: its factor, bin count, and objective."""
+
+    factor: int
+    bins: int
+    objective: Objective
+
+
+def build_pyramid(fixed: Image, moving: Image, *, factors: list[int], bins: list[int], metric: Metric = "jt",
+                  alpha: float = 2.0, weights: Weights = "histogram",
+                  tmi_form: Literal["additive", "relative"] = "additive",
+                  interpolation: Interpolation | list[Interpolation] = "bilinear",
+                  samples: int | None | list[int | None] = None, min_overlap: float = 0.25,
+                  seed: int = 0) -> list[Level]:
+    """One objective per pyramid factor (coarse to fine, as given), with ``bins[i]`` bins each
+    and interpolation ``interpolation[i]`` (or one for all).
+
+    The binning covers each full-resolution image's intensity range at every level; the
+    rotation centre is the full-resolution fixed image's centre; ``samples`` (one value or one
+    per level) caps the fixed samples per level (random subset drawn with ``seed + level``).
+    """
+    if len(bins) != len(factors):
+        raise ValueError(f"need one bin count per level: {len(factors)} levels, {len(bins)} bin counts")
+    interps = [interpolation] * len(factors) if isinstance(interpolation, str) else list(interpolation)
+    if len(interps) != len(factors):
+        raise ValueError(f"need one interpolation per level: {len(factors)} levels, {len(interps)} given")
+    caps = list(samples) if isinstance(samples, (list, tuple)) else [samples] * len(factors)
+    levels = []
+    for i, (f, b, interp, cap) in enumerate(zip(factors, bins, interps, caps)):
+        jh = JointHistogram(downsample(fixed.data, f), downsample(moving.data, f), Binning.of(fixed.data, b),
+                            Binning.of(moving.data, b), factor=f, center=fixed.center, interpolation=interp,
+                            samples=cap, seed=seed + i)
+        levels.append(Level(f, b, Objective(jh, metric, alpha=alpha, weights=weights, tmi_form=tmi_form,
+                                            min_overlap=min_overlap)))
+    return levels
+
+
+def rms_radius(shape: tuple[int, int]) -> float:
+    """Root-mean-square distance of the pixel centres of a (H, W) grid from its centre (pixels).
+
+    A rotation by ``d`` radians moves the pixels by ``d * rms_radius`` on average (RMS), which
+    is how the optimisers put angles and translations on one scale.
+    """
+    H, W = shape
+    return math.sqrt((W * W - 1) / 12.0 + (H * H - 1) / 12.0)
+
+
+def intensity_centroid(image: Image) -> np.ndarray:
+    """Centre of mass ``(col, row)`` of ``data - min(data)`` (pixels)."""
+    w = image.data - image.data.min()
+    total = w.sum()
+    H, W = image.shape
+    return np.array([w.sum(axis=0) @ np.arange(W), w.sum(axis=1) @ np.arange(H)]) / total

@@ -1,0 +1,153 @@
+"""``topomatch register`` and the registration configs run end to end (reduced where they are large)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image as PILImage
+
+from pipeline.cli import main
+from pipeline.config import load_experiment
+from pipeline.runner import run_experiment
+from tests_paths import REPO_ROOT
+
+CONFIGS = REPO_ROOT / "configs" / "registration"
+
+
+def register_cli(capsys, *args):
+    code = main(["register", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_json_recovers_the_itk_translation(capsys, itk_dir):
+    code, out, _ = register_cli(capsys, itk_dir / "BrainProtonDensitySliceBorder20.png",
+                                itk_dir / "BrainProtonDensitySliceShifted13x17y.png", "--json")
+    assert code == 0
+    res = json.loads(out)
+    assert res["tx"] == pytest.approx(13, abs=0.1) and res["ty"] == pytest.approx(17, abs=0.1)
+    assert abs(res["angle"]) < 0.1 and res["ok"] and res["metric"] == "jt"
+    assert {"objective", "iterations", "seconds", "center", "convention"} <= set(res)
+
+
+def test_cli_text_and_outputs(capsys, itk_dir, tmp_path):
+    code, out, _ = register_cli(capsys, itk_dir / "BrainT1Slice.png", itk_dir / "BrainProtonDensitySlice.png",
+                                "--metric", "mi", "--out", tmp_path / "out")
+    assert code == 0
+    for key in ("tx:", "ty:", "angle:", "objective:", "iterations:", "seconds:"):
+        assert key in out
+    resampled = np.asarray(PILImage.open(tmp_path / "out" / "moving_resampled.png"))
+    assert resampled.shape == (217, 181) and resampled.dtype == np.uint8
+    assert np.asarray(PILImage.open(tmp_path / "out" / "moving_resampled.tif")).dtype == np.float32
+    assert (tmp_path / "out" / "overlay.png").stat().st_size > 20_000
+    saved = json.loads((tmp_path / "out" / "registration.json").read_text())
+    assert len(saved["history"]["theta"]) == saved["iterations"]
+
+
+def test_cli_flags_a_misalignment_outside_the_capture_range(capsys, pd_slice, tmp_path):
+    from stages.registration.misalign import moved
+    from stages.registration.transform import RigidTransform
+
+    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 0, 0, 150))
+    path = tmp_path / "upside_down.png"
+    PILImage.fromarray(np.clip(moving.data, 0, 255).astype(np.uint8)).save(path)
+    PILImage.fromarray(pd_slice.data.astype(np.uint8)).save(tmp_path / "fixed.png")
+    code, out, err = register_cli(capsys, tmp_path / "fixed.png", path, "--json")
+    assert code == 1
+    assert json.loads(out)["ok"] is False
+    assert "registration flagged" in err and "capture range" in err
+
+
+def test_cli_bad_inputs(capsys, itk_dir, tmp_path):
+    png = itk_dir / "BrainT1Slice.png"
+    code, _, err = register_cli(capsys, png, tmp_path / "missing.png")
+    assert code == 1 and "missing.png: file not found" in err
+    code, _, err = register_cli(capsys, png, itk_dir / "KmeansTest_T1UCharRaw.nii.gz")
+    assert code == 1 and "KmeansTest_T1UCharRaw.nii.gz" in err and "different dimensionality" in err
+    code, out, _ = register_cli(capsys, itk_dir / "KmeansTest_T1UCharRaw.nii.gz", itk_dir / "KmeansTest_T1UCharRaw.nii.gz",
+                                "--fixed-slice", "30", "--moving-slice", "31", "--json")
+    assert code == 0 and json.loads(out)["ok"]
+    nan = np.full((40, 40), 5.0, np.float32)
+    nan[10:20, 10:20] = 50
+    nan[0, 0] = np.nan
+    PILImage.fromarray(nan).save(tmp_path / "nan.tif")
+    code, _, err = register_cli(capsys, png, tmp_path / "nan.tif")
+    assert code == 1 and "nan.tif: 1 of 1600 pixels are NaN" in err
+    PILImage.fromarray(np.zeros((40, 40), np.uint8)).save(tmp_path / "black.png")
+    code, _, err = register_cli(capsys, tmp_path / "black.png", png)
+    assert code == 1 and "black.png: image is constant" in err
+    (tmp_path / "broken.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00" * 20)
+    code, _, err = register_cli(capsys, png, tmp_path / "broken.png")
+    assert code == 1 and "broken.png: cannot read image" in err
+    assert "Traceback" not in err
+
+
+def _run(path: Path, tmp_path: Path, overrides=()):
+    experiment = load_experiment(path, overrides=["executor.workers=1", *overrides])
+    return run_experiment(experiment, out_root=tmp_path / "runs", progress=False)
+
+
+def test_demo_config(tmp_path):
+    outcome = _run(CONFIGS / "demo.yaml", tmp_path)
+    assert not outcome.failed
+    rows = json.loads((outcome.run_dir / "tables" / "registration.json").read_text())
+    assert rows[0]["tre_mean"] < 0.1 and rows[0]["ok"]
+    assert (outcome.run_dir / "figures" / "registration_overlay.png").exists()
+
+
+def test_analytic_figure_configs(tmp_path):
+    outcome = _run(CONFIGS / "entropy_bernoulli.yaml", tmp_path)
+    rows = json.loads((outcome.run_dir / "tables" / "fig2_2_tsallis_entropy.json").read_text())
+    for r in rows:
+        assert r["max"] == pytest.approx(r["max_exact"], rel=1e-9) and r["argmax_p"] == pytest.approx(0.5)
+    jt = json.loads((outcome.run_dir / "tables" / "fig2_3_jensen_tsallis.json").read_text())
+    assert all(r["min_on_diagonal"] < 1e-12 for r in jt)  # JT = 0 where p = q
+    assert {(r["at_p"], r["at_q"]) for r in jt} <= {(0.0, 1.0), (1.0, 0.0)}  # largest for opposite one-hots
+    outcome = _run(CONFIGS / "conditionals.yaml", tmp_path)
+    rows = json.loads((outcome.run_dir / "tables" / "fig2_4_conditionals.json").read_text())
+    aligned = [r for r in rows if (r["tx"], r["ty"], r["angle"]) == (0, 0, 0)]
+    moved = [r for r in rows if (r["tx"], r["ty"], r["angle"]) != (0, 0, 0)]
+    assert all(r["mean_row_max"] == pytest.approx(1.0) for r in aligned)  # crisp: one-hot rows
+    assert max(r["jt"] for r in moved) < min(r["jt"] for r in aligned)
+
+
+def test_recovery_config_reduced(tmp_path):
+    outcome = _run(CONFIGS / "recovery.yaml", tmp_path, ["sweep.misalign.theta=[[10, 20, 20]]",
+                                                          "sweep.register.metric=[jt, mi]"])
+    assert not outcome.failed and len(outcome.items) == 6
+    rows = json.loads((outcome.run_dir / "tables" / "fig2_6_to_2_8.json").read_text())
+    assert {r["method"].split("/")[1][:2] for r in rows} == {"jt", "mi"}
+    assert all(r["tre_mean"] < 0.5 for r in rows if r["method"].startswith("spsa/jt"))
+    assert len(list((outcome.run_dir / "figures").glob("fig2_6_to_2_8_*.png"))) == 3
+
+
+def test_landscape_configs_reduced(tmp_path):
+    outcome = _run(CONFIGS / "landscapes.yaml", tmp_path, ["landscape.points=9"])
+    assert not outcome.failed
+    assert (outcome.run_dir / "figures" / "fig2_9_2_10_jensen_tsallis.png").exists()
+    rows = json.loads((outcome.run_dir / "tables" / "fig2_9_2_10_jensen_tsallis.json").read_text())
+    assert all(r["peak_at"] == 0 for r in rows)  # both pairs are in register
+    outcome = _run(CONFIGS / "mri_volume_alpha.yaml", tmp_path, ["landscape.points=7"])
+    assert not outcome.failed and (outcome.run_dir / "figures" / "slices_registered.png").exists()
+
+
+def test_accuracy_sweep_config_reduced(tmp_path):
+    outcome = _run(CONFIGS / "accuracy_sweep.yaml", tmp_path, ["sweep.misalign_pair.index=[0]",
+                                                                "sweep.register.metric=[jt, mi]"])
+    assert not outcome.failed and len(outcome.items) == 4
+    rows = json.loads((outcome.run_dir / "tables" / "accuracy.json").read_text())
+    overall = {r["method"]: r for r in rows if r["pairs"] == "all"}
+    assert set(overall) == {"spsa/jt(alpha=2 histogram)", "spsa/mi", "simpleitk/mattes(regular_step)",
+                            "simpleitk/mattes(line_search)"}
+    assert overall["spsa/jt(alpha=2 histogram)"]["success_rate"] == 1.0
+    assert all(r["cases"] == 2 for r in overall.values())  # SimpleITK runs once per case, not per metric
+
+
+def test_itk_configs_validate_and_name_their_cases():
+    experiment = load_experiment(CONFIGS / "itk_cases.yaml")
+    assert len(experiment.inputs) == 5  # the S12 row has no consensus and is left out
+    assert all(u.values["truth"] and set(u.values["truth"]) == {"tx", "ty", "angle"} for u in experiment.inputs)
+    assert len(load_experiment(CONFIGS / "simpleitk_reference.yaml").items()) == 5
