@@ -21,6 +21,7 @@ import numpy as np
 from pydantic import Field
 
 from pipeline.errors import InputError
+from pipeline.paths import check_readable_file
 from pipeline.params import Params
 from pipeline.registry import stage
 from pipeline.result import StageResult
@@ -144,13 +145,7 @@ def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
         Missing or unreadable file, unknown format, parse failure, no faces,
         non-finite coordinates or face indices out of range.
     """
-    path = Path(path)
-    if not path.exists():
-        raise InputError(path, "file not found")
-    if not path.is_file():
-        raise InputError(path, "not a regular file")
-    if not os.access(path, os.R_OK):
-        raise InputError(path, "file is not readable (permission denied)")
+    path = check_readable_file(path)
     fmt = mesh_format(path)
     readers = {"igl": [_read_igl], "open3d": [_read_open3d], "auto": [_read_igl, _read_open3d]}[reader]
     problems = []

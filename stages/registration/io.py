@@ -16,7 +16,6 @@ image of different dimensionality.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import numpy as np
 from pydantic import Field
 
 from pipeline.errors import InputError
+from pipeline.paths import check_readable_file
 from pipeline.params import Params
 from pipeline.registry import stage
 from pipeline.result import StageResult
@@ -114,13 +114,7 @@ def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...]]:
     2D images give ``(H, W)``, volumes ``(k, j, i)`` (SimpleITK order); spacing has one entry
     per axis. Raises :class:`InputError` for a missing, unreadable or unsupported file.
     """
-    path = Path(path)
-    if not path.exists():
-        raise InputError(path, "file not found")
-    if not path.is_file():
-        raise InputError(path, "not a regular file")
-    if not os.access(path, os.R_OK):
-        raise InputError(path, "file is not readable (permission denied)")
+    path = check_readable_file(path)
     if path.stat().st_size == 0:
         raise InputError(path, "file is empty (0 bytes)")
     fmt = image_format(path)
