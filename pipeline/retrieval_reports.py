@@ -58,7 +58,7 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
 
     from stages.retrieval.descriptor import MatchOptions
     from stages.retrieval.metrics import retrieval_metrics
-    from stages.retrieval.ranking import dissimilarity_matrix
+    from stages.retrieval.ranking import VECTOR_METHODS, dissimilarity_matrix
 
     labels = _labels(experiment, params.labels)
     items = [r for r in results if r.ok and str(Path(r.input_path).resolve()) in labels]
@@ -73,7 +73,8 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
     for method, label in params.methods.items():
         kept = [i for i, r in enumerate(items) if label in r.results]
         descriptors = [items[i].results[label].descriptor for i in kept]
-        D = dissimilarity_matrix(descriptors, method if method in ("d2", "sh", "shapedna") else "srg", options)
+        kind = method if method in VECTOR_METHODS else "srg"  # endpoint descriptors share one comparison
+        D = dissimilarity_matrix(descriptors, kind, options)
         m = retrieval_metrics(D, y[kept])
         for avg, values in (("micro", m.micro), ("macro", m.macro)):
             metric_rows.append({"method": method, "average": avg, "n": len(kept),
