@@ -38,6 +38,7 @@ from pydantic import Field
 from pipeline.params import Params
 from stages.mesh.mesh import Mesh
 from stages.retrieval.baselines.sampling import checked_areas, sample_surface
+from stages.retrieval.baselines.vectors import pairwise
 
 
 class D2Params(Params):
@@ -114,10 +115,4 @@ def distance(a: np.ndarray, b: np.ndarray) -> float:
 
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
     """All pairwise L1 distances: ``X`` (n, bins), ``Y`` (m, bins) (default ``X``) -> (n, m) float64."""
-    from scipy.spatial.distance import cdist
-
-    X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-    Y = X if Y is None else np.atleast_2d(np.asarray(Y, dtype=np.float64))
-    if X.shape[1] != Y.shape[1]:
-        raise ValueError(f"descriptor lengths differ: {X.shape} vs {Y.shape}")
-    return cdist(X, Y, metric="cityblock")
+    return pairwise(X, Y, metric="cityblock")

@@ -53,6 +53,7 @@ from pydantic import Field
 from pipeline.errors import StageError
 from pipeline.params import Params
 from stages.mesh.mesh import Mesh
+from stages.retrieval.baselines.vectors import pairwise
 
 Normalization = Literal["area", "area_index", "none"]
 
@@ -202,10 +203,4 @@ def distance(a: np.ndarray, b: np.ndarray) -> float:
 
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
     """All pairwise L2 distances: ``X`` (n, k), ``Y`` (m, k) (default ``X``) -> (n, m) float64."""
-    from scipy.spatial.distance import cdist
-
-    X = np.atleast_2d(np.asarray(X, dtype=np.float64))
-    Y = X if Y is None else np.atleast_2d(np.asarray(Y, dtype=np.float64))
-    if X.shape[1] != Y.shape[1]:
-        raise ValueError(f"descriptor lengths differ: {X.shape} vs {Y.shape}")
-    return cdist(X, Y, metric="euclidean")
+    return pairwise(X, Y, metric="euclidean")

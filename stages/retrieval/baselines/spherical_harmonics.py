@@ -62,6 +62,7 @@ from pydantic import Field, model_validator
 from pipeline.params import Params
 from stages.mesh.mesh import Mesh
 from stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, checked_areas, sample_surface
+from stages.retrieval.baselines.vectors import pairwise
 
 
 class SphericalHarmonicsParams(Params):
@@ -236,11 +237,4 @@ def distance(a: np.ndarray, b: np.ndarray) -> float:
 
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
     """All pairwise L2 distances: ``X`` (n, radii, bands + 1) or (n, d), ``Y`` likewise -> (n, m)."""
-    from scipy.spatial.distance import cdist
-
-    X = np.asarray(X, dtype=np.float64)
-    X = X.reshape(X.shape[0], -1)
-    Y = X if Y is None else np.asarray(Y, dtype=np.float64).reshape(np.shape(Y)[0], -1)
-    if X.shape[1] != Y.shape[1]:
-        raise ValueError(f"descriptor sizes differ: {X.shape} vs {Y.shape}")
-    return cdist(X, Y, metric="euclidean")
+    return pairwise(X, Y, metric="euclidean")
