@@ -18,6 +18,7 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/topomatch run configs/demo.yaml
 	$(BIN)/topomatch run configs/registration/demo.yaml
+	$(BIN)/topomatch run configs/retrieval/demo.yaml
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -106,6 +106,9 @@ class RawConfig(_Strict):
     description: str = ""
     inputs: InputsConfig = InputsConfig()
     sweep: dict[str, list[Any]] = Field(default_factory=dict)
+    sweep_mode: Literal["grid", "one_at_a_time"] = Field(
+        "grid", description="grid: every combination of the sweep values; one_at_a_time: the first value of "
+                            "every key (the baseline), then each other value of one key with the rest at baseline")
     stages: list[str | dict[str, dict[str, Any] | None]] = Field(min_length=1)
     reports: list[str | dict[str, dict[str, Any] | None]] = Field(default_factory=list)
     executor: ExecutorConfig = ExecutorConfig()
@@ -169,9 +172,13 @@ class Experiment:
         return self.raw.name
 
     def sweep_points(self) -> list[dict[str, Any]]:
-        """Cartesian product of the sweep values, in config order."""
+        """The sweep points, in config order: the Cartesian product of the sweep values (``grid``), or
+        the baseline (every key at its first value) then one key at a time (``one_at_a_time``)."""
         keys = list(self.raw.sweep)
-        return [dict(zip(keys, combo)) for combo in itertools.product(*(self.raw.sweep[k] for k in keys))]
+        if self.raw.sweep_mode == "grid":
+            return [dict(zip(keys, combo)) for combo in itertools.product(*(self.raw.sweep[k] for k in keys))]
+        baseline = {k: self.raw.sweep[k][0] for k in keys}
+        return [baseline] + [{**baseline, k: v} for k in keys for v in self.raw.sweep[k][1:]]
 
     def items(self) -> list[Item]:
         """Every (input, sweep point) pair with its resolved stage calls."""
@@ -194,6 +201,7 @@ class Experiment:
             "description": self.raw.description,
             "inputs": [{"label": u.label, **u.values} for u in self.inputs],
             "sweep": self.raw.sweep,
+            "sweep_mode": self.raw.sweep_mode,
             "stages": [{c.spec.name: c.params.canonical()} for c in self.calls],
             "stage_versions": {c.spec.name: c.spec.version for c in self.calls},
             "reports": [{r.name: r.params.canonical()} for r in self.reports],
@@ -411,9 +419,12 @@ def _sweep_target(key: str, calls: tuple[StageCall, ...]) -> tuple[int, str]:
     if key.count(".") != 1:
         raise ConfigError(f"sweep.{key}: expected 'stage.param'")
     name, param = key.split(".")
-    matches = [i for i, c in enumerate(calls) if c.spec.name == name]
+    matches = [i for i, c in enumerate(calls) if c.label == name]  # a label: 'decimate' is the first, 'decimate#2' ...
+    if not matches:
+        matches = [i for i, c in enumerate(calls) if c.spec.name == name]
     if len(matches) != 1:
-        raise ConfigError(f"sweep.{key}: the chain has {len(matches)} stages called {name!r}, expected exactly one")
+        raise ConfigError(f"sweep.{key}: the chain has {len(matches)} stages called {name!r}, expected exactly one "
+                          f"(name a repeated stage by its label: {name}#2, {name}#3, ...)")
     call = calls[matches[0]]
     if param not in call.spec.params.model_fields:
         known = ", ".join(call.spec.params.model_fields) or "none"

@@ -32,6 +32,8 @@ STAGE_MODULES: tuple[str, ...] = (
     "stages.crosscheck.decimation",
     "stages.spectral.laplacian",
     "stages.spectral.fiedler",
+    "stages.spectral.spectrum",
+    "stages.spectral.heat_kernel",
     "stages.morse.stage",
     "stages.reeb.level_sets",
     "stages.reeb.reeb_graph",

@@ -6,6 +6,8 @@
   (``FILE.cache/``); unchanged meshes are skipped, an interrupted index resumes, a bad mesh is
   recorded as failed with its reason.
 - ``query MESH --db FILE``: the ranked list of the closest indexed shapes.
+- a fused method (``--method topomatch``, :mod:`stages.retrieval.fusion`) indexes each of its
+  parts and ranks by their fused, re-ranked dissimilarities.
 - ``evaluate --db FILE``: the full dissimilarity matrix of the labelled rows, PSB metrics, and
   the matrix written to an ``.npz`` file.
 """
@@ -27,12 +29,16 @@ from pipeline.errors import ConfigError, InputError, StageError
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 
 
-def _method_args(p: argparse.ArgumentParser, default: str = "srg") -> None:
+def _method_args(p: argparse.ArgumentParser, default: str = "srg", *, fusions: bool = True) -> None:
+    from stages.retrieval.fusion import FUSIONS
     from stages.retrieval.methods import METHODS
 
-    p.add_argument("--method", default=default, choices=sorted(METHODS),
+    p.add_argument("--method", default=default, choices=sorted(METHODS) + (sorted(FUSIONS) if fusions else []),
                    help=f"descriptor: rgpd (mixture-distance skeleton, thesis ch. 3), srg (Fiedler skeleton, ch. 4), "
-                        f"d2, sh (spherical harmonics), shapedna (default {default})")
+                        f"agd (intrinsic skeleton + heat-kernel endpoint signatures), hks (heat kernel signature "
+                        f"histograms), d2, sh (spherical harmonics), shapedna"
+                        + (", or topomatch (all of agd, hks, shapedna, d2, sh fused, re-ranked; the best)"
+                           if fusions else "") + f" (default {default})")
 
 
 def _match_args(p: argparse.ArgumentParser) -> None:
@@ -57,7 +63,7 @@ def add_parsers(sub) -> None:
                        "by their skeleton endpoints (or a baseline descriptor), with the correspondence.")
     p.add_argument("a", help="first mesh")
     p.add_argument("b", help="second mesh")
-    _method_args(p)
+    _method_args(p, fusions=False)
     _match_args(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=cmd_match)
@@ -206,31 +212,43 @@ def read_labels(path: str | Path) -> dict[str, str]:
         return {str((path.parent / row[pcol]).resolve()): row[lcol] for row in reader}
 
 
+def part_methods(method: str) -> tuple[str, ...]:
+    """The methods whose descriptors ``method`` needs: its fusion's parts, or itself."""
+    from stages.retrieval.fusion import FUSIONS
+
+    return FUSIONS[method].parts if method in FUSIONS else (method,)
+
+
 def cmd_index(args) -> int:
+    files = mesh_files(args.paths)
+    if not files:
+        raise InputError(None, f"no mesh files ({', '.join(MESH_SUFFIXES)}, optionally .gz) in {' '.join(args.paths)}")
+    labels = read_labels(args.labels) if args.labels else {}
+    for method in part_methods(args.method):
+        _index_method(method, files, labels, Path(args.db), args)
+    return 0
+
+
+def _index_method(method: str, files: list[Path], labels: dict[str, str], db_path: Path, args) -> None:
     from tqdm import tqdm
 
     from pipeline import executors
     from pipeline.cache import hash_file
     from pipeline.shape_index import ShapeIndex
 
-    files = mesh_files(args.paths)
-    if not files:
-        raise InputError(None, f"no mesh files ({', '.join(MESH_SUFFIXES)}, optionally .gz) in {' '.join(args.paths)}")
-    labels = read_labels(args.labels) if args.labels else {}
-    db_path = Path(args.db)
     t0 = time.perf_counter()
     with ShapeIndex(db_path) as index:
-        experiment = method_experiment(args.method, files, workers=args.workers, executor=args.executor)
+        experiment = method_experiment(method, files, workers=args.workers, executor=args.executor)
         params, phash = params_of(experiment)
-        known = index.known(args.method, phash, include_failed=not args.retry_failed)
+        known = index.known(method, phash, include_failed=not args.retry_failed)
         hashes = {str(f): hash_file(f) for f in files}
         todo = [item for item in experiment.items() if hashes[item.input_path] not in known]
         done = failed = 0
-        with tqdm(total=len(todo), desc=f"index {args.method}", unit="mesh", disable=args.no_progress) as bar:
+        with tqdm(total=len(todo), desc=f"index {method}", unit="mesh", disable=args.no_progress) as bar:
             for r in executors.execute(todo, _cache_for(db_path), experiment.raw.executor):
                 d = r.final("descriptor")
                 index.put(content_hash=hashes[r.input_path], path=r.input_path, label=labels.get(r.input_path),
-                          method=args.method, params_hash=phash, params=params,
+                          method=method, params_hash=phash, params=params,
                           status="ok" if r.ok else "failed", reason=r.error,
                           n_endpoints=None if d is None else d.n_endpoints, kind=None if d is None else d.kind,
                           descriptor=None if d is None else d.data, seconds=sum(r.seconds.values()))
@@ -241,12 +259,11 @@ def cmd_index(args) -> int:
             index.set_labels(labels)
     seconds = time.perf_counter() - t0
     print(f"{db_path}: {done} indexed, {failed} failed, {len(files) - len(todo)} unchanged (skipped) "
-          f"[{args.method}, {seconds:.1f} s]")
+          f"[{method}, {seconds:.1f} s]")
     if failed:
         with ShapeIndex(db_path) as index:
-            for row in index.rows(args.method, phash, status="failed"):
+            for row in index.rows(method, phash, status="failed"):
                 print(f"  failed: {row.reason}", file=sys.stderr)
-    return 0
 
 
 # --------------------------------------------------------------------------- query / evaluate
@@ -269,24 +286,65 @@ def _indexed(db: str, method: str):
     return rows, [Descriptor(r.kind, r.descriptor, r.n_endpoints) for r in rows]
 
 
-def cmd_query(args) -> int:
-    from stages.retrieval.ranking import dissimilarities
+def indexed_parts(db: str, method: str):
+    """Index rows present for every part of ``method`` (same order), and {part: descriptors}."""
+    parts = part_methods(method)
+    indexed = {part: _indexed(db, part) for part in parts}
+    common = set.intersection(*({r.path for r in rows} for rows, _ in indexed.values()))
+    rows = [r for r in indexed[parts[0]][0] if r.path in common]
+    descriptors = {}
+    for part, (part_rows, part_descriptors) in indexed.items():
+        by_path = {r.path: d for r, d in zip(part_rows, part_descriptors)}
+        descriptors[part] = [by_path[r.path] for r in rows]
+    return rows, descriptors
 
-    rows, descriptors = _indexed(args.db, args.method)
+
+def _part_options(part: str, method: str, args):
+    """Matching options of one part: the user's for a single method, the part's defaults in a fusion."""
+    from stages.retrieval.descriptor import MatchOptions
+    from stages.retrieval.fusion import FUSIONS
+    from stages.retrieval.methods import UNMATCHED_COST
+
+    if method in FUSIONS:
+        return MatchOptions(unmatched_cost=UNMATCHED_COST.get(part, 0.0))
+    return _options(args)
+
+
+def _matrix(method: str, descriptors: dict, args) -> np.ndarray:
+    """Full dissimilarity matrix of ``method`` (fused and re-ranked for a fusion)."""
+    from stages.retrieval.fusion import FUSIONS, fused_matrix
+    from stages.retrieval.ranking import dissimilarity_matrix
+
+    parts = [dissimilarity_matrix(descriptors[p], p, _part_options(p, method, args)) for p in part_methods(method)]
+    return fused_matrix(parts, FUSIONS[method]) if method in FUSIONS else parts[0]
+
+
+def cmd_query(args) -> int:
+    from stages.retrieval.fusion import FUSIONS, fused_query
+    from stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
+
+    rows, descriptors = indexed_parts(args.db, args.method)
+    parts = part_methods(args.method)
     t = time.perf_counter()
-    query, _ = compute_descriptor(Path(args.mesh), args.method, _cache_for(Path(args.db)))
+    query = {p: compute_descriptor(Path(args.mesh), p, _cache_for(Path(args.db)))[0] for p in parts}
     t_desc = time.perf_counter() - t
     t = time.perf_counter()
-    d = dissimilarities(query, descriptors, args.method, _options(args))
+    rows_d = [dissimilarities(query[p], descriptors[p], p, _part_options(p, args.method, args)) for p in parts]
+    if args.method in FUSIONS:
+        mats = [dissimilarity_matrix(descriptors[p], p, _part_options(p, args.method, args)) for p in parts]
+        d = fused_query(rows_d, mats, FUSIONS[args.method])
+    else:
+        d = rows_d[0]
     order = np.argsort(d, kind="stable")[: args.k]
     t_rank = time.perf_counter() - t
+    endpoints = next((q.n_endpoints for q in query.values() if q.n_endpoints is not None), None)
     results = [{"rank": i + 1, "path": rows[j].path, "label": rows[j].label, "dissimilarity": float(d[j]),
                 "endpoints": rows[j].n_endpoints} for i, j in enumerate(order) if np.isfinite(d[j])]
     if args.json:
-        print(json.dumps({"query": args.mesh, "method": args.method, "endpoints": query.n_endpoints,
+        print(json.dumps({"query": args.mesh, "method": args.method, "endpoints": endpoints,
                           "seconds": {"descriptor": t_desc, "ranking": t_rank}, "results": results}))
     else:
-        print(f"query {args.mesh} ({args.method}, {query.n_endpoints if query.n_endpoints is not None else '-'} "
+        print(f"query {args.mesh} ({args.method}, {endpoints if endpoints is not None else '-'} "
               f"endpoints) against {len(rows)} shapes:")
         for r in results:
             print(f"  {r['rank']:>3}. {r['dissimilarity']:.5f}  {r['label'] or '':<12} {r['path']}")
@@ -295,15 +353,14 @@ def cmd_query(args) -> int:
 
 def cmd_evaluate(args) -> int:
     from stages.retrieval.metrics import retrieval_metrics
-    from stages.retrieval.ranking import dissimilarity_matrix
 
-    rows, descriptors = _indexed(args.db, args.method)
+    rows, descriptors = indexed_parts(args.db, args.method)
     keep = [i for i, r in enumerate(rows) if r.label]
     if len(keep) < 2:
         raise ConfigError(f"{args.db}: fewer than two labelled shapes for {args.method}; index with --labels")
     rows = [rows[i] for i in keep]
     t = time.perf_counter()
-    D = dissimilarity_matrix([descriptors[i] for i in keep], args.method, _options(args))
+    D = _matrix(args.method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, args)
     seconds = time.perf_counter() - t
     labels = np.array([r.label for r in rows])
     metrics = retrieval_metrics(D, labels)

@@ -18,10 +18,13 @@ from stages.matching.dissimilarity import Dissimilarity, match_features
 
 
 def pad_features(sets: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Stack (n_i, 3) feature arrays into (len(sets), max n_i, 3) with NaN padding, and the counts."""
+    """Stack (n_i, d) feature arrays into (len(sets), max n_i, d) with NaN padding, and the counts."""
     counts = np.array([len(s) for s in sets], dtype=np.int64)
     width = int(counts.max(initial=0))
-    out = np.full((len(sets), max(width, 1), 3), np.nan)
+    dims = {s.shape[1] for s in sets if len(s)} or {3}
+    if len(dims) > 1:
+        raise ValueError(f"endpoint feature sets of different widths: {sorted(dims)}")
+    out = np.full((len(sets), max(width, 1), dims.pop()), np.nan)
     for i, s in enumerate(sets):
         out[i, : len(s)] = s
     return out, counts
@@ -37,7 +40,7 @@ def one_to_many(
     unmatched_cost: float = 0.0,
     chunk: int = 20000,
 ) -> np.ndarray:
-    """Dissimilarity of ``query`` (e, 3) to every padded feature set in ``database`` (p, w, 3).
+    """Dissimilarity of ``query`` (e, d) to every padded feature set in ``database`` (p, w, d).
 
     Returns (p,) float64. ``optimal`` correspondence falls back to one
     ``match_features`` call per pair (not vectorised).

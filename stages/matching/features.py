@@ -98,3 +98,18 @@ def endpoint_features(G: nx.Graph) -> EndpointFeatures:
     s = d_root.sum() or 1.0
     a = np.array([G.nodes[v]["area"] for v in ends]) / total_area
     return EndpointFeatures(np.column_stack([a, d_ends.sum(axis=1) / s, d_root / s]), ends, root)
+
+
+def endpoint_signatures(G: nx.Graph, ends: list, signature: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """(len(ends), s) area-weighted mean of a vertex signature (n, s) over each endpoint node's vertices.
+
+    Describes what each protrusion tip looks like (e.g. the heat kernel signature: thin or
+    thick, long or short), which the three skeleton ratios cannot tell apart.
+    """
+    out = np.zeros((len(ends), signature.shape[1]))
+    for row, v in enumerate(ends):
+        members = np.asarray(G.nodes[v]["members"], dtype=np.int64)
+        w = mass[members]
+        if w.sum() > 0:
+            out[row] = w @ signature[members] / w.sum()
+    return out

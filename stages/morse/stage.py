@@ -18,9 +18,10 @@ from stages.morse.function import MorseFunction
 class MorseParams(Params):
     """Parameters of :func:`morse`."""
 
-    function: Literal["mixture", "euclidean", "affine", "fiedler", "height", "geodesic"] = Field(
+    function: Literal["mixture", "euclidean", "affine", "fiedler", "height", "geodesic", "agd"] = Field(
         "mixture", description="mixture distance (thesis ch. 3), its Euclidean or affine part, the Fiedler "
-                               "vector (ch. 4), principal-axis height, or heat geodesic distance from the centroid")
+                               "vector (ch. 4), principal-axis height, heat geodesic distance from the centroid, "
+                               "or average geodesic distance (Hilaga 2001, intrinsic)")
     centroid: Literal["vertices", "area", "enclosing_sphere"] = Field(
         "vertices", description="centre c of the distance functions: vertex mean, area centroid, or centre of "
                                 "the minimal enclosing sphere")
@@ -28,6 +29,7 @@ class MorseParams(Params):
     euclidean_scale: Literal["mean_squared_radius", "none"] = Field(
         "mean_squared_radius", description="divide the Euclidean term by its mean (scale invariant) or not (literal)")
     mass: Literal["full", "voronoi"] = Field("full", description="Fiedler: FEM mass matrix type")
+    sources: int = Field(256, ge=1, description="agd: number of area-sampled Dijkstra sources")
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,6 +53,10 @@ def morse_function(mesh: Mesh, params: MorseParams) -> MorseFunction:
         from stages.morse.height import principal_height
 
         return principal_height(mesh.V)
+    if params.function == "agd":
+        from stages.morse.agd import average_geodesic_distance
+
+        return average_geodesic_distance(mesh.V, mesh.F, sources=params.sources)
     if params.function == "geodesic":
         from stages.morse.geodesic import geodesic_from_centroid
 
@@ -62,5 +68,5 @@ def morse_function(mesh: Mesh, params: MorseParams) -> MorseFunction:
 
 @stage("morse", params=MorseParams, version=1, consumes=("mesh",), produces=("function",))
 def morse(mesh: Mesh, *, params: MorseParams) -> MorseResult:
-    """A Morse function on the vertices (mixture distance, Fiedler vector, height, geodesic)."""
+    """A Morse function on the vertices (mixture distance, Fiedler vector, height, geodesic, AGD)."""
     return MorseResult(morse_function(mesh, params))

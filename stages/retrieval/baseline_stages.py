@@ -20,7 +20,7 @@ def spherical_harmonics_stage(mesh, *, params: spherical_harmonics.SphericalHarm
     return DescriptorResult(Descriptor("vector", spherical_harmonics.descriptor(mesh, params).ravel()))
 
 
-@stage("shapedna", params=shapedna.ShapeDNAParams, version=2, consumes=("mesh",), produces=("descriptor",))
+@stage("shapedna", params=shapedna.ShapeDNAParams, version=3, consumes=("mesh",), produces=("descriptor",))
 def shapedna_stage(mesh, *, params: shapedna.ShapeDNAParams) -> DescriptorResult:
     """ShapeDNA (Reuter et al. 2006): normalised leading Laplace-Beltrami eigenvalues."""
     return DescriptorResult(Descriptor("vector", shapedna.descriptor(mesh, params)))

@@ -18,7 +18,7 @@ from pydantic import Field
 from pipeline.params import Params
 from pipeline.registry import stage
 from pipeline.result import StageResult
-from stages.matching.features import endpoint_features
+from stages.matching.features import endpoint_features, endpoint_signatures
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,7 +29,7 @@ class Descriptor:
     ----------
     kind : {'endpoints', 'vector'}
     data : ndarray
-        (n, 3) endpoint features (a, dv, dc) or a 1-D vector.
+        (n, 3) endpoint features (a, dv, dc), (n, 3 + s) with an endpoint signature, or a 1-D vector.
     n_endpoints : int or None
         Endpoint count (endpoint descriptors only).
     """
@@ -58,6 +58,30 @@ def endpoint_descriptor(skeleton, *, params: EndpointDescriptorParams) -> Descri
     """Endpoint features (relative area, node path, centroid path) of the pruned skeleton."""
     f = endpoint_features(skeleton.graph)
     return DescriptorResult(Descriptor("endpoints", f.features, f.n))
+
+
+class EndpointHKSParams(Params):
+    """Parameters of the ``endpoint_hks_descriptor`` stage."""
+
+    weight: float = Field(0.3, ge=0, description="scale of the signature columns against (a, dv, dc)")
+    t_min: float = Field(0.005, gt=0, description="smallest HKS time, in units of the surface area")
+    t_max: float = Field(0.5, gt=0, description="largest HKS time, in units of the surface area")
+    n_times: int = Field(8, ge=1, le=64, description="log-spaced HKS times")
+
+
+@stage("endpoint_hks_descriptor", params=EndpointHKSParams, version=1, consumes=("skeleton", "spectrum"),
+       produces=("descriptor",))
+def endpoint_hks_descriptor(skeleton, spectrum, *, params: EndpointHKSParams) -> DescriptorResult:
+    """Endpoint features (a, dv, dc) plus the mean heat kernel signature of each endpoint's region.
+
+    The skeleton and the spectrum must come from the same mesh (same vertex numbering).
+    """
+    from stages.spectral.heat_kernel import heat_kernel_signature
+
+    f = endpoint_features(skeleton.graph)
+    times = np.geomspace(params.t_min, params.t_max, params.n_times)
+    sig = endpoint_signatures(skeleton.graph, f.endpoints, heat_kernel_signature(spectrum, times), spectrum.mass)
+    return DescriptorResult(Descriptor("endpoints", np.hstack([f.features, params.weight * sig]), f.n))
 
 
 class MatchOptions(Params):

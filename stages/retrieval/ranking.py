@@ -16,7 +16,15 @@ from stages.retrieval.baselines import BASELINES
 from stages.retrieval.descriptor import Descriptor, MatchOptions
 
 #: Index method name -> baseline name for vector descriptors.
-VECTOR_METHODS = {"d2": "d2", "sh": "spherical_harmonics", "shapedna": "shapedna"}
+VECTOR_METHODS = {"d2": "d2", "sh": "spherical_harmonics", "shapedna": "shapedna", "hks": "hks"}
+
+
+def _vector_distances(method: str):
+    if method == "hks":
+        from stages.spectral.heat_kernel import distance_matrix
+
+        return distance_matrix
+    return BASELINES[VECTOR_METHODS[method]].distance_matrix
 
 
 def _endpoint_options(options: MatchOptions) -> dict:
@@ -32,7 +40,7 @@ def dissimilarities(query: Descriptor, database: list[Descriptor], method: str,
         return np.zeros(0)
     if method in VECTOR_METHODS:
         X = np.stack([d.data.ravel() for d in database])
-        return BASELINES[VECTOR_METHODS[method]].distance_matrix(query.data.ravel()[None], X)[0]
+        return _vector_distances(method)(query.data.ravel()[None], X)[0]
     padded, counts = pad_features([d.data for d in database])
     out = one_to_many(query.data, padded, counts, **_endpoint_options(options))
     if options.endpoint_window is not None:
@@ -45,7 +53,7 @@ def dissimilarity_matrix(descriptors: list[Descriptor], method: str, options: Ma
     options = options or MatchOptions()
     if method in VECTOR_METHODS:
         X = np.stack([d.data.ravel() for d in descriptors])
-        return BASELINES[VECTOR_METHODS[method]].distance_matrix(X, X)
+        return _vector_distances(method)(X, X)
     padded, counts = pad_features([d.data for d in descriptors])
     M = np.stack([one_to_many(d.data, padded, counts, **_endpoint_options(options)) for d in descriptors])
     if options.endpoint_window is not None:

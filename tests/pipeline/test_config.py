@@ -80,6 +80,17 @@ def test_sweep_expands_to_the_product(small_config):
     assert sigmas == {0.0, 0.01, 0.02}
 
 
+def test_sweep_one_at_a_time(small_config):
+    small_config["sweep"] = {"noise.sigma": [0.0, 0.01, 0.02], "noise.seed": [1, 2]}
+    small_config["sweep_mode"] = "one_at_a_time"
+    points = build_experiment(small_config).sweep_points()
+    assert points == [{"noise.sigma": 0.0, "noise.seed": 1}, {"noise.sigma": 0.01, "noise.seed": 1},
+                      {"noise.sigma": 0.02, "noise.seed": 1}, {"noise.sigma": 0.0, "noise.seed": 2}]
+    small_config["sweep_mode"] = "diagonal"
+    with pytest.raises(ConfigError, match="sweep_mode"):
+        build_experiment(small_config)
+
+
 def test_yaml_anchor_free_safe_loading(tmp_path):
     bad = tmp_path / "evil.yaml"
     bad.write_text("name: !!python/object/apply:os.system ['echo hi']\nstages: [load]\n")

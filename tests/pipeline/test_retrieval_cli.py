@@ -105,3 +105,23 @@ def test_errors(tmp_path, capsys):
     assert code == 1 and "none.db: index not found" in err
     code, _, err = run(capsys, "index", tmp_path / "nothing", "--db", tmp_path / "x.db")
     assert code == 1 and "nothing: file not found" in err
+
+
+def test_fused_topomatch_method(collection, tmp_path, capsys):
+    db = tmp_path / "index.db"
+    code, out, _ = run(capsys, "index", collection, "--db", db, "--method", "topomatch", "--labels",
+                       collection / "labels.csv", "--workers", "1", "--no-progress")
+    assert code == 0
+    for part in ("agd", "hks", "shapedna", "d2", "sh"):  # one index run per part of the fusion
+        assert f"6 indexed, 0 failed, 0 unchanged (skipped) [{part}," in out
+    code, out, _ = run(capsys, "query", collection / "odedstein_hand_closed.obj.gz", "--db", db,
+                       "--method", "topomatch", "-k", "6", "--json")
+    result = json.loads(out)
+    assert code == 0 and result["results"][0]["path"].endswith("odedstein_hand_closed.obj.gz")
+    assert len(result["results"]) == 6
+    code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch", "--json", "--out", tmp_path / "D.npz")
+    D = np.load(tmp_path / "D.npz")["D"]
+    assert code == 0 and D.shape == (6, 6) and np.allclose(D, D.T) and np.allclose(np.diag(D), D.min(axis=1))
+    # a fusion needs an index: match offers only single methods
+    with pytest.raises(SystemExit):
+        main(["match", str(collection / "torus.off"), str(collection / "torus.off"), "--method", "topomatch"])

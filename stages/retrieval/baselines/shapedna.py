@@ -69,34 +69,14 @@ class ShapeDNAParams(Params):
                                                                    "'none': raw eigenvalues")
 
 
-#: Components with at most this many vertices are solved densely (scipy.linalg.eigh).
-DENSE_MAX = 400
-
-
 def _component_nonzero_eigenvalues(Q, K, want: int, sigma: float, name: str) -> np.ndarray:
     """The ``want`` smallest eigenvalues of one connected component, its zero dropped (ascending).
 
     Fewer are returned when the component has fewer than ``want + 1`` vertices.
     """
-    import scipy.linalg as la
-    import scipy.sparse.linalg as sla
+    from stages.spectral.spectrum import shift_invert_eigsh
 
-    from stages.spectral.eigensolver import ShiftInvert
-
-    n = Q.shape[0]
-    nev = min(want + 1, n)
-    if n <= max(DENSE_MAX, want + 2):
-        vals = la.eigh(Q.toarray(), K.toarray(), eigvals_only=True, subset_by_index=[0, nev - 1])
-        return np.sort(vals)[1:]
-    v0 = np.random.default_rng(0).standard_normal(n)
-    try:
-        inv = ShiftInvert(Q, K, sigma)  # qdldl LDL^T (SuperLU without qdldl) of Q - sigma K
-        opinv = sla.LinearOperator((n, n), matvec=inv.solve, dtype=np.float64)
-        vals = sla.eigsh(Q, k=nev, M=K, sigma=sigma, OPinv=opinv, which="LM", v0=v0, tol=1e-10,
-                         return_eigenvectors=False)
-    except (sla.ArpackNoConvergence, sla.ArpackError, RuntimeError, ValueError) as exc:
-        raise StageError(f"{name}: eigsh failed for {nev} eigenpairs of a {n}-vertex component ({exc})") from None
-    return np.sort(np.real(vals))[1:]
+    return shift_invert_eigsh(Q, K, min(want + 1, Q.shape[0]), sigma, name)[1:]
 
 
 def eigenvalues(mesh: Mesh, k: int, mass: Literal["full", "voronoi"] = "full") -> tuple[np.ndarray, float]:
@@ -108,7 +88,7 @@ def eigenvalues(mesh: Mesh, k: int, mass: Literal["full", "voronoi"] = "full") -
     run on the whole matrix would find only one vector of an eigenvalue shared exactly by
     several components (a Krylov space holds one direction per eigenspace; e.g. it misses
     one of the six copies of ``lambda_1`` of two identical spheres). Components of at most
-    :data:`DENSE_MAX` vertices are solved densely. Within one connected component ARPACK
+    ``stages.spectral.spectrum.DENSE_MAX`` vertices are solved densely. Within one connected component ARPACK
     recovers exactly repeated eigenvalues (symmetric shapes) through round-off; the
     unit-sphere test (exact 3- and 5-fold multiplicities on the icosphere) checks that.
 
