@@ -14,8 +14,9 @@ Methods
 ``shift_invert`` (the default for n > 400)
     Factor ``S = Q - sigma K`` once, with ``sigma < 0`` slightly negative (``S`` is then
     SPD: no pivoting, and the kernel of ``Q`` does not make it singular), by a sparse
-    LDL^T (qdldl, AMD ordering) or SuperLU (MMD on A^T + A) when qdldl is missing. Then a
-    block Krylov–Rayleigh–Ritz iteration with the operator ``W = S^{-1} K`` (a
+    Cholesky LL^T (Eigen's simplicial LLT through libigl, AMD ordering; with ``threads > 1``
+    a sparse LDL^T, qdldl, AMD ordering), or SuperLU (MMD on A^T + A) when neither is
+    available. Then a block Krylov–Rayleigh–Ritz iteration with the operator ``W = S^{-1} K`` (a
     Davidson/Lanczos hybrid, full K-orthogonalisation, locking of converged pairs, thick
     restarts): each step adds ``W x`` for the unconverged wanted Ritz vectors ``x`` (with
     qdldl, which releases the GIL, the columns of a block are solved in two threads).
@@ -269,11 +270,12 @@ def _available_cpus() -> int:
     return max(1, min(2, n))
 
 
-def _upper_triangle_csc(S: sp.csc_matrix) -> sp.csc_matrix:
-    """The upper triangle (diagonal included) of a CSC matrix with sorted indices, without a COO round trip."""
+def _upper_triangle_csc(S: sp.csc_matrix, lower: bool = False) -> sp.csc_matrix:
+    """The upper (or lower) triangle, diagonal included, of a CSC matrix with sorted indices, without a
+    COO round trip."""
     counts = np.diff(S.indptr)
     cols = np.repeat(np.arange(S.shape[1], dtype=S.indices.dtype), counts)
-    keep = S.indices <= cols
+    keep = S.indices >= cols if lower else S.indices <= cols
     indptr = np.zeros(S.shape[1] + 1, dtype=S.indptr.dtype)
     np.cumsum(np.bincount(cols[keep], minlength=S.shape[1]), out=indptr[1:])
     return sp.csc_matrix((S.data[keep], S.indices[keep], indptr), shape=S.shape)
@@ -282,8 +284,12 @@ def _upper_triangle_csc(S: sp.csc_matrix) -> sp.csc_matrix:
 class ShiftInvert:
     """A factorisation of ``S = Q - sigma K`` (sigma < 0, so S is SPD), solve many times.
 
-    Uses qdldl (sparse LDL^T, AMD ordering) when installed, else SuperLU with the
-    MMD(A^T + A) ordering and no pivoting (S is SPD).
+    ``backend='auto'`` uses Eigen's simplicial Cholesky LL^T (AMD ordering) through libigl's
+    ``min_quad_with_fixed`` with one thread, qdldl (sparse LDL^T, AMD ordering) with more
+    threads (it releases the GIL, so the columns of a block can be solved in parallel), else
+    SuperLU with the MMD(A^T + A) ordering and no pivoting (S is SPD). On the 48k-vertex horse
+    the LL^T factorisation takes ~100 ms against ~130 ms for qdldl's LDL^T; a solve takes
+    ~3.4 ms against ~2.9 ms.
 
     Parameters
     ----------
@@ -291,7 +297,7 @@ class ShiftInvert:
         Stiffness and mass matrices.
     sigma : float
         The shift, < 0.
-    backend : {'auto', 'qdldl', 'superlu'}
+    backend : {'auto', 'igl', 'qdldl', 'superlu'}
         Factorisation library.
     threads : int, optional
         Threads for the columns of a block solve (qdldl only, at most the CPUs this process
@@ -315,6 +321,20 @@ class ShiftInvert:
             S = (Q - self.sigma * K).tocsc()
         self.n = S.shape[0]
         self.backend = backend
+        if backend == "igl" or (backend == "auto" and self.threads == 1):
+            try:
+                import igl
+
+                # Eigen's SimplicialLLT reads the lower triangle; min_quad_with_fixed solves S Z = -B
+                self._igl = igl.min_quad_with_fixed_data()
+                self._igl_solve = igl.min_quad_with_fixed_solve
+                igl.min_quad_with_fixed_precompute(_upper_triangle_csc(S, lower=True), np.zeros(0, dtype=np.int64),
+                                                   sp.csc_matrix((0, self.n)), True, self._igl)
+                self.backend = "igl"
+                return
+            except ImportError:
+                if backend == "igl":
+                    raise
         if backend in ("auto", "qdldl"):
             try:
                 import qdldl
@@ -337,6 +357,12 @@ class ShiftInvert:
         """
         if self.backend == "superlu":
             return self._lu.solve(np.asarray(B, dtype=np.float64))
+        if self.backend == "igl":
+            B2 = np.asarray(B, dtype=np.float64).reshape(self.n, -1)
+            empty = np.zeros((0, B2.shape[1]))
+            X = self._igl_solve(self._igl, B2, empty, empty)
+            np.negative(X, out=X)
+            return X.reshape(B.shape)
         if B.ndim == 1:
             return self._qdldl.solve(np.ascontiguousarray(B, dtype=np.float64))
         cols = [np.ascontiguousarray(B[:, j], dtype=np.float64) for j in range(B.shape[1])]
@@ -746,7 +772,7 @@ def smallest_eigenpairs(
     sigma: float | None = None,
     seed: int = 0,
     coarse_vertices: int = 3000,
-    backend: Literal["auto", "qdldl", "superlu"] = "auto",
+    backend: Literal["auto", "igl", "qdldl", "superlu"] = "auto",
     fallback: bool = True,
     threads: int = 1,
 ) -> Eigenpairs:
@@ -776,8 +802,8 @@ def smallest_eigenpairs(
         Seed of the random part of the start block.
     coarse_vertices : int
         Target vertex count of the coarse mesh (``multilevel``).
-    backend : {'auto', 'qdldl', 'superlu'}
-        Sparse factorisation for ``shift_invert``.
+    backend : {'auto', 'igl', 'qdldl', 'superlu'}
+        Sparse factorisation for ``shift_invert`` (:class:`ShiftInvert`).
     fallback : bool
         On failure, try the other methods (module docstring).
     threads : int

@@ -161,3 +161,23 @@ def test_similarity_transform_gives_an_isomorphic_skeleton(bundled_mesh, kind):
         p1 = np.asarray(S1.graph.nodes[v]["pos"])
         p2 = np.asarray(S2.graph.nodes[mapping[v]]["pos"])
         np.testing.assert_allclose(p2, 2.0 * R @ p1 + [3.0, -1.0, 7.0], atol=1e-9)
+
+
+@pytest.mark.parametrize("rounds", [0, 1, 8])
+def test_row_components_number_like_scipy(monkeypatch, rounds):
+    """The min-hooking components of the band partition equal scipy's, labels included, also when
+    the hooking rounds run out and scipy finishes the job."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    import stages.reeb.reeb_graph as rg
+
+    monkeypatch.setattr(rg, "HOOK_ROUNDS", rounds)
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        n, r, e = int(rng.integers(1, 300)), int(rng.integers(0, 200)), int(rng.integers(0, 40))
+        rows = rng.integers(0, n, size=(3, r)).astype(np.int32)
+        a, b = rng.integers(0, n, size=(2, e)).astype(np.int32)
+        u, w = np.concatenate([rows[0], rows[0], a]), np.concatenate([rows[1], rows[2], b])
+        expected = connected_components(coo_matrix((np.ones(len(u)), (u, w)), shape=(n, n)), directed=False)[1]
+        assert np.array_equal(rg._row_components(n, rows, a, b), expected)

@@ -129,8 +129,10 @@ def test_arpack_fallback_and_backends(bundled_mesh):
     e = smallest_eigenpairs(lap.Q, lap.K, 3, V=mesh.V, method="shift_invert", maxiter=1, fallback=False)
     assert e.method == "arpack"
     np.testing.assert_allclose(e.values, ref.values, rtol=1e-10)
-    e = smallest_eigenpairs(lap.Q, lap.K, 3, V=mesh.V, backend="superlu")
-    np.testing.assert_allclose(e.values, ref.values, rtol=1e-10)
+    for backend in ("qdldl", "superlu"):
+        e = smallest_eigenpairs(lap.Q, lap.K, 3, V=mesh.V, backend=backend)
+        np.testing.assert_allclose(e.values, ref.values, rtol=1e-10)
+        np.testing.assert_allclose(e.fiedler, ref.fiedler, atol=1e-8 * np.abs(ref.fiedler).max())
     e = smallest_eigenpairs(lap.Q, lap.K, 3, V=mesh.V, threads=2)
     np.testing.assert_allclose(e.values, ref.values, rtol=1e-10)
     with pytest.raises(ValueError, match="threads"):
@@ -155,11 +157,13 @@ def test_shift_invert_backends_solve_the_same_system(bundled_mesh):
     rng = np.random.default_rng(3)
     B = rng.standard_normal((lap.n, 2))
     S = (lap.Q + 0.5 * lap.K).toarray()
-    for backend in ("qdldl", "superlu"):
+    for backend in ("auto", "igl", "qdldl", "superlu"):
         for threads in (1, 2):
             with ShiftInvert(lap.Q, lap.K, -0.5, backend=backend, threads=threads) as fac:
                 X = fac.solve(B)
                 x = fac.solve(B[:, 0])
+                assert np.array_equal(fac.solve(np.asfortranarray(B)), X)
+            assert fac.backend == {"auto": "igl" if threads == 1 else "qdldl"}.get(backend, backend)
             np.testing.assert_allclose(S @ X, B, atol=1e-8 * np.abs(B).max())
             np.testing.assert_allclose(x, X[:, 0], rtol=1e-12, atol=1e-14)
     with pytest.raises(ValueError, match="negative"):
