@@ -36,10 +36,16 @@ def execute(items: Sequence[Item], cache_root: str | None, config: ExecutorConfi
 
 
 def _single_threaded() -> None:
-    """Pool-worker initializer: one BLAS / OpenMP thread per worker process."""
+    """Pool-worker initializer: one BLAS / OpenMP thread per worker process.
+
+    threadpoolctl only limits the libraries already loaded, and scipy ships its own OpenBLAS
+    (besides numpy's), loaded with ``scipy.linalg``: import it first.
+    """
     try:
+        import scipy.linalg  # noqa: F401  (loads scipy's OpenBLAS)
+        import scipy.sparse.linalg  # noqa: F401
         from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - threadpoolctl is a dependency
+    except ImportError:  # pragma: no cover - both are dependencies
         return
     threadpool_limits(limits=1)
 

@@ -152,3 +152,22 @@ def test_dask_executor_connects_to_an_existing_scheduler(small_config, tmp_path)
         small_config["executor"] = {"kind": "dask", "address": cluster.scheduler_address}
         outcome = _run(small_config, tmp_path)
     assert len(outcome.items) == 4 and not outcome.failed
+
+
+def test_pool_workers_use_one_blas_thread():
+    # numpy's and scipy's OpenBLAS both limited in a worker process (no oversubscription)
+    import multiprocessing
+
+    from pipeline.executors import _single_threaded
+
+    ctx = multiprocessing.get_context("forkserver")
+    with ctx.Pool(1, initializer=_single_threaded) as pool:
+        threads = pool.apply(_blas_threads_in_worker)
+    assert threads and all(n == 1 for n in threads)
+
+
+def _blas_threads_in_worker():
+    import scipy.sparse.linalg  # noqa: F401  (what the stages use: scipy's own OpenBLAS)
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
