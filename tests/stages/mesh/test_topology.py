@@ -121,3 +121,19 @@ def test_unreferenced_vertices_do_not_change_the_euler_characteristic(shapes):
 def test_empty_mesh():
     r = topology_report(Mesh(np.zeros((2, 3)), np.zeros((0, 3), np.int64)))
     assert (r.n_faces, r.n_unreferenced_vertices, r.genus, r.is_closed) == (0, 2, None, False)
+
+
+def test_nonmanifold_vertices_agree_with_libigl(bundled_mesh):
+    import igl
+
+    from stages.mesh.topology import nonmanifold_vertices
+
+    mesh = bundled_mesh("odedstein_hand_lowres.obj.gz")
+    F = mesh.F
+    # two cones glued at one apex (a bow tie of fans) and a dangling fin on an edge
+    bowtie = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [0, 4, 5], [0, 5, 6], [0, 6, 4], [1, 2, 7], [1, 2, 8]])
+    for faces in (F, bowtie, F[: len(F) // 2]):
+        n = int(faces.max()) + 1
+        expected = ~np.asarray(igl.is_vertex_manifold(faces), dtype=bool)
+        np.testing.assert_array_equal(nonmanifold_vertices(faces, n), expected[:n])
+    assert nonmanifold_vertices(bowtie, 9)[0] and nonmanifold_vertices(bowtie, 9).sum() == 1
