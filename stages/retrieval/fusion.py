@@ -75,7 +75,7 @@ def _ranking_graph(D: np.ndarray, k: int) -> np.ndarray:
         D[~np.isfinite(D)] = 2 * D[np.isfinite(D)].max(initial=1.0)
     np.fill_diagonal(D, 0.0)
     k = max(1, min(k, n - 1))
-    order = np.argsort(D, axis=1, kind="stable")
+    order = np.argpartition(D, k, axis=1)  # [:, k] is the k-th nearest, [:, :k + 1] the k + 1 nearest
     scale = np.maximum(D[np.arange(n), order[:, k]], 1e-300)
     W = np.exp(-D ** 2 / (scale[:, None] * scale[None, :]))
     keep = np.zeros((n, n), dtype=bool)
