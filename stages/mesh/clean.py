@@ -252,8 +252,8 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
         V, F = _remove_unreferenced(V, F[mask])
         dropped_vertices = n_before - V.shape[0]
 
-    cleaned = Mesh(V, F, name=mesh.name)
-    after = topology_report(cleaned)
+    after = topology_report(Mesh(V, F, name=mesh.name))
+    cleaned = Mesh(V, F, name=mesh.name, closed_manifold=after.is_closed and after.n_nonmanifold_edges == 0)
     if params.fail_on_nonmanifold and not after.is_manifold:
         raise InputError(mesh.name, f"mesh has {after.n_nonmanifold_edges} non-manifold edges and "
                                     f"{after.n_nonmanifold_vertices} non-manifold vertices after cleaning; "

@@ -19,11 +19,16 @@ class Mesh:
         Triangles as vertex indices (0-based).
     name : str
         Short name for tables and figures (usually the file stem).
+    closed_manifold : bool or None
+        Whether every edge has exactly two faces, when known: set by ``clean`` (from its
+        topology report), kept by :meth:`with_vertices`; None = not known (computed where
+        needed, e.g. by the Reeb graph, at the cost of one sort of the half-edges).
     """
 
     V: np.ndarray
     F: np.ndarray
     name: str = field(default="mesh")
+    closed_manifold: bool | None = field(default=None)
 
     def __post_init__(self) -> None:
         V = np.ascontiguousarray(self.V, dtype=np.float64)
@@ -44,5 +49,5 @@ class Mesh:
         return int(self.F.shape[0])
 
     def with_vertices(self, V: np.ndarray) -> "Mesh":
-        """Same connectivity and name, new positions ``V`` (n, 3)."""
-        return Mesh(V, self.F, self.name)
+        """Same connectivity, name and closedness, new positions ``V`` (n, 3)."""
+        return Mesh(V, self.F, self.name, self.closed_manifold)

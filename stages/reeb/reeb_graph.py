@@ -481,4 +481,5 @@ class ReebResult(StageResult):
 def reeb_graph_stage(mesh, function, level_sets, *, params: ReebParams) -> ReebResult:
     """Reeb graph: one node per connected component of each band, edges across contours."""
     return ReebResult(reeb_graph(mesh.V, mesh.F, function.values, level_sets.values, root=function.root,
-                                 root_mode=params.root_mode, split_handle_bands=params.split_handle_bands))
+                                 root_mode=params.root_mode, split_handle_bands=params.split_handle_bands,
+                                 closed=mesh.closed_manifold))

@@ -142,3 +142,16 @@ def test_params_validation():
         CleanParams.parse({"components": "biggest"}, "stages[1].clean")
     with pytest.raises(ConfigError, match="unknown key"):
         CleanParams.parse({"largest_component": True}, "stages[1].clean")
+
+
+def test_clean_records_closedness_and_moves_keep_it(bundled_mesh):
+    from stages.mesh.clean import CleanParams, clean_mesh
+    from stages.reeb.reeb_graph import is_closed_manifold
+
+    torus = clean_mesh(bundled_mesh("torus.off"), CleanParams()).mesh
+    assert torus.closed_manifold is True and is_closed_manifold(torus.F)
+    assert torus.with_vertices(2.0 * torus.V).closed_manifold is True
+    half = Mesh(torus.V, torus.F[: len(torus.F) // 2], name="half")
+    opened = clean_mesh(half, CleanParams(components="largest")).mesh
+    assert opened.closed_manifold is False and not is_closed_manifold(opened.F)
+    assert Mesh(torus.V, torus.F).closed_manifold is None  # unknown unless clean said so
