@@ -29,16 +29,16 @@ from pipeline.errors import ConfigError, InputError, StageError
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 
 
-def _method_args(p: argparse.ArgumentParser, default: str = "srg", *, fusions: bool = True) -> None:
+def _method_args(p: argparse.ArgumentParser, default: str = "srg") -> None:
     from stages.retrieval.fusion import FUSIONS
     from stages.retrieval.methods import METHODS
 
-    p.add_argument("--method", default=default, choices=sorted(METHODS) + (sorted(FUSIONS) if fusions else []),
+    p.add_argument("--method", default=default, choices=sorted(METHODS) + sorted(FUSIONS),
                    help=f"descriptor: rgpd (mixture-distance skeleton, thesis ch. 3), srg (Fiedler skeleton, ch. 4), "
                         f"agd (intrinsic skeleton + heat-kernel endpoint signatures), hks (heat kernel signature "
                         f"histograms), d2, sh (spherical harmonics), shapedna"
-                        + (", or topomatch (all of agd, hks, shapedna, d2, sh fused, re-ranked; the best)"
-                           if fusions else "") + f" (default {default})")
+                        ", or topomatch (all of agd, hks, shapedna, d2, sh fused, re-ranked; the best)"
+                        f" (default {default})")
 
 
 def _match_args(p: argparse.ArgumentParser) -> None:
@@ -63,7 +63,7 @@ def add_parsers(sub) -> None:
                        "by their skeleton endpoints (or a baseline descriptor), with the correspondence.")
     p.add_argument("a", help="first mesh")
     p.add_argument("b", help="second mesh")
-    _method_args(p, fusions=False)
+    _method_args(p)
     _match_args(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.set_defaults(handler=cmd_match)
@@ -146,6 +146,12 @@ def _cache_for(db: Path) -> str:
 
 def cmd_match(args) -> int:
     from stages.matching.dissimilarity import match_features
+    from stages.retrieval.fusion import FUSIONS
+
+    if args.method in FUSIONS:
+        raise ConfigError(f"match: {args.method} is a fused method whose scales and re-ranking come from a "
+                          f"collection; index the meshes and use query, or match with one of its parts "
+                          f"({', '.join(FUSIONS[args.method].parts)})")
     from stages.retrieval.methods import ENDPOINT_METHODS
     from stages.retrieval.ranking import dissimilarities
 

@@ -15,8 +15,8 @@ NIPS 2004), symmetrised and normalised ``S = D^-1/2 W D^-1/2``; the ranking scor
 ``F = (I - alpha S)^-1``, i.e. similarity diffused along the graph, so two shapes related through
 a chain of close neighbours rank higher than their direct distance says. It uses the database's
 own structure (no labels). The output dissimilarity is ``1 - F_ij / max F`` for a collection
-and ``1 - F_qj / max_j F_qj`` for one query (one linear solve): rankings are those of the
-scores; values compare within a row. Cost: O(n^3) dense linear algebra, about 0.02 s for 400
+and ``1 - F_qj / max_j F_qj`` over the database items j for one query (one linear solve; the
+best match gets 0): rankings are those of the scores; values compare within a row. Cost: O(n^3) dense linear algebra, about 0.02 s for 400
 shapes; for very large indexes rank without it (``rerank_k: null``).
 """
 
@@ -145,4 +145,5 @@ def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], f
     A = np.zeros((n + 1, n + 1))
     A[:n, :n] = fuse(part_matrices, scales)
     A[n, :n] = A[:n, n] = row
-    return manifold_ranking_row(A, n, fusion.rerank_k, fusion.rerank_alpha)[:n]
+    score = 1.0 - manifold_ranking_row(A, n, fusion.rerank_k, fusion.rerank_alpha)[:n]  # the query's own node left out
+    return 1.0 - score / score.max()  # 0 for the best database match

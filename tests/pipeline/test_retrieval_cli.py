@@ -118,10 +118,10 @@ def test_fused_topomatch_method(collection, tmp_path, capsys):
                        "--method", "topomatch", "-k", "6", "--json")
     result = json.loads(out)
     assert code == 0 and result["results"][0]["path"].endswith("odedstein_hand_closed.obj.gz")
-    assert len(result["results"]) == 6
+    assert result["results"][0]["dissimilarity"] == 0.0 and len(result["results"]) == 6
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch", "--json", "--out", tmp_path / "D.npz")
     D = np.load(tmp_path / "D.npz")["D"]
     assert code == 0 and D.shape == (6, 6) and np.allclose(D, D.T) and np.allclose(np.diag(D), D.min(axis=1))
-    # a fusion needs an index: match offers only single methods
-    with pytest.raises(SystemExit):
-        main(["match", str(collection / "torus.off"), str(collection / "torus.off"), "--method", "topomatch"])
+    # a fusion needs an index: match explains and exits 2
+    code, _, err = run(capsys, "match", collection / "torus.off", collection / "torus.off", "--method", "topomatch")
+    assert code == 2 and "fused method" in err and "agd" in err
