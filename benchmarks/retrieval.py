@@ -57,12 +57,12 @@ def simulated_fusion(n: int, rng: np.random.Generator) -> dict[str, list[Descrip
 def fused_benchmark(args, rng) -> None:
     from pipeline.retrieval_cli import indexed_parts
     from stages.retrieval.fusion import FUSIONS, fused_matrix, fused_query, median_scale
-    from stages.retrieval.methods import UNMATCHED_COST
+    from stages.retrieval.methods import default_match_options
 
     fusion = FUSIONS[args.method]
     rows, parts = indexed_parts(args.db, args.method)
     n = len(rows)
-    opts = {p: MatchOptions(unmatched_cost=UNMATCHED_COST.get(p, 0.0)) for p in fusion.parts}
+    opts = {p: default_match_options(p) for p in fusion.parts}
 
     def prepare():
         return [dissimilarity_matrix(parts[p], p, opts[p]) for p in fusion.parts]

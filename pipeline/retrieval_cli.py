@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import argparse
-import csv
 import hashlib
 import json
 import sys
@@ -202,22 +201,6 @@ def _is_mesh(path: Path) -> bool:
     return name.endswith(MESH_SUFFIXES)
 
 
-def read_labels(path: str | Path) -> dict[str, str]:
-    """{resolved mesh path: label} from a CSV with relative_path|path and class|label columns."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(path, "labels file not found")
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        cols = reader.fieldnames or []
-        pcol = next((c for c in ("relative_path", "path") if c in cols), None)
-        lcol = next((c for c in ("class", "label") if c in cols), None)
-        if pcol is None or lcol is None:
-            raise InputError(path, f"labels CSV needs a relative_path (or path) and a class (or label) column; "
-                                   f"found {', '.join(cols)}")
-        return {str((path.parent / row[pcol]).resolve()): row[lcol] for row in reader}
-
-
 def part_methods(method: str) -> tuple[str, ...]:
     """The methods whose descriptors ``method`` needs: its fusion's parts, or itself."""
     from stages.retrieval.fusion import FUSIONS
@@ -242,6 +225,8 @@ def cmd_index(args) -> int:
     files = mesh_files(args.paths)
     if not files:
         raise InputError(None, f"no mesh files ({', '.join(MESH_SUFFIXES)}, optionally .gz) in {' '.join(args.paths)}")
+    from pipeline.shape_index import read_labels
+
     labels = read_labels(args.labels) if args.labels else {}
     db_path = Path(args.db)
     hashes = {str(f): hash_file(f) for f in files}
@@ -320,13 +305,10 @@ def indexed_parts(db: str, method: str):
 
 def _part_options(part: str, method: str, args):
     """Matching options of one part: the user's for a single method, the part's defaults in a fusion."""
-    from stages.retrieval.descriptor import MatchOptions
     from stages.retrieval.fusion import FUSIONS
-    from stages.retrieval.methods import UNMATCHED_COST
+    from stages.retrieval.methods import default_match_options
 
-    if method in FUSIONS:
-        return MatchOptions(unmatched_cost=UNMATCHED_COST.get(part, 0.0))
-    return _options(args)
+    return default_match_options(part) if method in FUSIONS else _options(args)
 
 
 def _matrix(method: str, descriptors: dict, args) -> np.ndarray:

@@ -16,7 +16,6 @@ metrics (:mod:`stages.retrieval.metrics`), and writes:
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +25,7 @@ from pipeline.errors import ConfigError
 from pipeline.params import Params
 from pipeline.paths import resolve_input
 from pipeline.reports import ReportOutput, report
+from pipeline.shape_index import read_labels
 
 
 class RetrievalBenchmarkParams(Params):
@@ -52,11 +52,7 @@ class RetrievalBenchmarkParams(Params):
 def _labels(experiment, template: str) -> dict[str, str]:
     base = experiment.source.parent if experiment.source else Path.cwd()
     (path,) = resolve_input(template, base_dir=base, root=experiment.data_root, where="reports.retrieval.labels")[:1]
-    with open(path, newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
-    key = "relative_path" if rows and "relative_path" in rows[0] else "path"
-    col = "class" if rows and "class" in rows[0] else "label"
-    return {str((path.parent / r[key]).resolve()): r[col] for r in rows}
+    return read_labels(path)
 
 
 @report("retrieval_benchmark", params=RetrievalBenchmarkParams)
@@ -153,11 +149,10 @@ def _comparison(method: str) -> str:
 
 def _match_options(method: str, params):
     """Endpoint matching options of a report method (the params' unmatched cost, else the method's default)."""
-    from stages.retrieval.descriptor import MatchOptions
-    from stages.retrieval.methods import UNMATCHED_COST
+    from stages.retrieval.methods import default_match_options
 
-    cost = params.unmatched_cost if params.unmatched_cost is not None else UNMATCHED_COST.get(method, 0.2)
-    return MatchOptions(correspondence=params.correspondence, unmatched_cost=cost)
+    cost = {} if params.unmatched_cost is None else {"unmatched_cost": params.unmatched_cost}
+    return default_match_options(method, correspondence=params.correspondence, **cost)
 
 
 def _restrict(matrix: tuple[list[int], np.ndarray], kept: list[int]) -> np.ndarray:
@@ -226,6 +221,7 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
     if len(db_paths) < 2:
         raise ConfigError("retrieval_robustness: fewer than two labelled clean items (the first sweep point)")
     db_items = [clean[p] for p in db_paths]
+    position = {p: i for i, p in enumerate(db_paths)}
     matrices = {m: _method_matrix(db_items, m, label, params) for m, label in params.methods.items()}
     if any(len(kept) != len(db_items) for kept, _ in matrices.values()):
         raise ConfigError("retrieval_robustness: every clean item needs every method's descriptor")
@@ -235,7 +231,7 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
         found = by_point.get(_point_name(point), {})
         paths = [p for p in db_paths if p in found and all(label in found[p].results
                                                            for label in params.methods.values())]
-        idx = np.array([db_paths.index(p) for p in paths], dtype=np.int64)
+        idx = np.array([position[p] for p in paths], dtype=np.int64)
         y = np.array([labels[str(Path(p).resolve())] for p in paths])
         single = {}
         for method, label in params.methods.items():

@@ -159,7 +159,7 @@ def nonmanifold_vertices(F: np.ndarray, n_vertices: int) -> np.ndarray:
     first, second = order[:-1][same], order[1:][same]  # consecutive faces around one edge
     a = np.concatenate([c_lo[first], c_hi[first]])
     b = np.concatenate([c_lo[second], c_hi[second]])
-    graph = coo_matrix((np.ones(a.size, dtype=np.int8), (a, b)), shape=(3 * m, 3 * m))
+    graph = coo_matrix((np.ones(a.size, dtype=bool), (a, b)), shape=(3 * m, 3 * m))  # bool: repeats stay edges
     _, label = connected_components(graph, directed=False)
     pairs = np.unique(F.ravel() * (3 * m) + label)  # (vertex, fan) pairs
     fans = np.bincount(pairs // (3 * m), minlength=n_vertices)

@@ -19,6 +19,7 @@ from pipeline.params import Params
 from pipeline.registry import stage
 from pipeline.result import StageResult
 from stages.matching.features import endpoint_features, endpoint_signatures
+from stages.spectral.heat_kernel import HKSTimes, heat_kernel_signature
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,13 +61,10 @@ def endpoint_descriptor(skeleton, *, params: EndpointDescriptorParams) -> Descri
     return DescriptorResult(Descriptor("endpoints", f.features, f.n))
 
 
-class EndpointHKSParams(Params):
-    """Parameters of the ``endpoint_hks_descriptor`` stage."""
+class EndpointHKSParams(HKSTimes):
+    """Parameters of the ``endpoint_hks_descriptor`` stage: the HKS times and the signature's weight."""
 
     weight: float = Field(0.3, ge=0, description="scale of the signature columns against (a, dv, dc)")
-    t_min: float = Field(0.005, gt=0, description="smallest HKS time, in units of the surface area")
-    t_max: float = Field(0.5, gt=0, description="largest HKS time, in units of the surface area")
-    n_times: int = Field(8, ge=1, le=64, description="log-spaced HKS times")
 
 
 @stage("endpoint_hks_descriptor", params=EndpointHKSParams, version=1, consumes=("skeleton", "spectrum"),
@@ -76,11 +74,9 @@ def endpoint_hks_descriptor(skeleton, spectrum, *, params: EndpointHKSParams) ->
 
     The skeleton and the spectrum must come from the same mesh (same vertex numbering).
     """
-    from stages.spectral.heat_kernel import heat_kernel_signature
-
     f = endpoint_features(skeleton.graph)
-    times = np.geomspace(params.t_min, params.t_max, params.n_times)
-    sig = endpoint_signatures(skeleton.graph, f.endpoints, heat_kernel_signature(spectrum, times), spectrum.mass)
+    sig = endpoint_signatures(skeleton.graph, f.endpoints, heat_kernel_signature(spectrum, params.times()),
+                              spectrum.mass)
     return DescriptorResult(Descriptor("endpoints", np.hstack([f.features, params.weight * sig]), f.n))
 
 

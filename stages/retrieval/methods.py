@@ -59,3 +59,11 @@ ENDPOINT_METHODS = ("rgpd", "srg", "agd")
 
 #: Unmatched-endpoint cost per endpoint method (thesis methods: 0.2, measured in docs/retrieval.md).
 UNMATCHED_COST = {"rgpd": 0.2, "srg": 0.2, "agd": 0.5}
+
+
+def default_match_options(method: str, **overrides):
+    """The :class:`~stages.retrieval.descriptor.MatchOptions` a method is compared with by default
+    (its unmatched-endpoint cost; vector methods ignore the options), with ``overrides``."""
+    from stages.retrieval.descriptor import MatchOptions
+
+    return MatchOptions(**{"unmatched_cost": UNMATCHED_COST.get(method, 0.0), **overrides})

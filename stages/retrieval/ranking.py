@@ -14,17 +14,15 @@ import numpy as np
 from stages.matching.batch import one_to_many, pad_features
 from stages.retrieval.baselines import BASELINES
 from stages.retrieval.descriptor import Descriptor, MatchOptions
+from stages.spectral import heat_kernel
 
-#: Index method name -> baseline name for vector descriptors.
-VECTOR_METHODS = {"d2": "d2", "sh": "spherical_harmonics", "shapedna": "shapedna", "hks": "hks"}
-
-
-def _vector_distances(method: str):
-    if method == "hks":
-        from stages.spectral.heat_kernel import distance_matrix
-
-        return distance_matrix
-    return BASELINES[VECTOR_METHODS[method]].distance_matrix
+#: Index method name -> the (n, m) distance matrix of its vector descriptors.
+VECTOR_METHODS = {
+    "d2": BASELINES["d2"].distance_matrix,
+    "sh": BASELINES["spherical_harmonics"].distance_matrix,
+    "shapedna": BASELINES["shapedna"].distance_matrix,
+    "hks": heat_kernel.distance_matrix,
+}
 
 
 def _endpoint_options(options: MatchOptions) -> dict:
@@ -40,7 +38,7 @@ def dissimilarities(query: Descriptor, database: list[Descriptor], method: str,
         return np.zeros(0)
     if method in VECTOR_METHODS:
         X = np.stack([d.data.ravel() for d in database])
-        return _vector_distances(method)(query.data.ravel()[None], X)[0]
+        return VECTOR_METHODS[method](query.data.ravel()[None], X)[0]
     padded, counts = pad_features([d.data for d in database])
     out = one_to_many(query.data, padded, counts, **_endpoint_options(options))
     if options.endpoint_window is not None:
@@ -53,7 +51,7 @@ def dissimilarity_matrix(descriptors: list[Descriptor], method: str, options: Ma
     options = options or MatchOptions()
     if method in VECTOR_METHODS:
         X = np.stack([d.data.ravel() for d in descriptors])
-        return _vector_distances(method)(X, X)
+        return VECTOR_METHODS[method](X, X)
     padded, counts = pad_features([d.data for d in descriptors])
     M = np.stack([one_to_many(d.data, padded, counts, **_endpoint_options(options)) for d in descriptors])
     if options.endpoint_window is not None:

@@ -33,16 +33,21 @@ def heat_kernel_signature(spectrum: Spectrum, times: np.ndarray) -> np.ndarray:
     return np.log(np.maximum(H / mean, 1e-300))
 
 
-class HKSParams(Params):
-    """Times and histogram of the ``hks`` descriptor."""
+class HKSTimes(Params):
+    """Log-spaced HKS times, in units of the surface area (shared by the HKS descriptors)."""
 
     t_min: float = Field(0.005, gt=0, description="smallest time, in units of the surface area")
     t_max: float = Field(0.5, gt=0, description="largest time, in units of the surface area")
     n_times: int = Field(8, ge=1, le=64, description="log-spaced times between t_min and t_max")
-    bins: int = Field(32, ge=2, le=1024, description="histogram bins per time on [-3, 3] (log HKS / mean)")
 
     def times(self) -> np.ndarray:
         return np.geomspace(self.t_min, self.t_max, self.n_times)
+
+
+class HKSParams(HKSTimes):
+    """Times and histogram of the ``hks`` descriptor."""
+
+    bins: int = Field(32, ge=2, le=1024, description="histogram bins per time on [-3, 3] (log HKS / mean)")
 
 
 def hks_histograms(spectrum: Spectrum, params: HKSParams) -> np.ndarray:
