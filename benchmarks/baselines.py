@@ -12,14 +12,14 @@ threaded BLAS inside ARPACK would oversubscribe the cores).
 Timing: each descriptor (default parameters) on a few bundled meshes of ``data/meshes``, run
 ``--repeat`` times after one warm-up, interleaved; the median wall time is reported as a
 markdown table. Loading is excluded. Then the 400 x 400 distance matrix of each baseline
-(random descriptors of the default sizes) and :func:`~stages.retrieval.metrics.retrieval_metrics`
+(random descriptors of the default sizes) and :func:`~topomatch.stages.retrieval.metrics.retrieval_metrics`
 on it. Medians (not minima) are reported: on a shared machine single runs vary by 2-10x.
 
 ``--watertight`` computes the three descriptors for the 400 meshes of
 ``$TOPOMATCH_DATA_ROOT/meshes/shrec07_watertight`` (``labels.csv``), each first cleaned with
 the ``clean`` stage's defaults (merge duplicates, drop degenerate faces: bearing/351 has five
 zero-area triangles that the Laplacian rejects), in ``--workers`` processes, then the full dissimilarity matrices and the PSB metrics
-(:func:`stages.retrieval.metrics.retrieval_metrics`), printed as one markdown table.
+(:func:`topomatch.stages.retrieval.metrics.retrieval_metrics`), printed as one markdown table.
 ``--variants`` adds ShapeDNA with ``normalization='area'`` and k = 50 and D2 with 128
 bins (the variants reuse the sampled distances and the eigenvalues, so the per-mesh time of
 a variant is only its extra work). Nothing is written unless ``--json`` is given.
@@ -63,10 +63,10 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from stages.mesh.clean import CleanParams, clean_mesh  # noqa: E402
-from stages.mesh.io import read_mesh  # noqa: E402
-from stages.retrieval.baselines import BASELINES, d2, shapedna  # noqa: E402
-from stages.retrieval.metrics import METRIC_NAMES, retrieval_metrics  # noqa: E402
+from topomatch.stages.mesh.clean import CleanParams, clean_mesh  # noqa: E402
+from topomatch.stages.mesh.io import read_mesh  # noqa: E402
+from topomatch.stages.retrieval.baselines import BASELINES, d2, shapedna  # noqa: E402
+from topomatch.stages.retrieval.metrics import METRIC_NAMES, retrieval_metrics  # noqa: E402
 
 DEFAULT_MESHES = ("torus.off", "odedstein_hand_lowres.obj.gz", "odedstein_koala_low_resolution.obj.gz",
                   "odedstein_human_man.obj.gz", "odedstein_cat-low-resolution.obj.gz",

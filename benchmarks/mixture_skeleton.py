@@ -32,12 +32,12 @@ from pathlib import Path
 import igl
 import numpy as np
 
-from stages.mesh.decimate import simplify_to_target
-from stages.mesh.io import read_mesh
-from stages.morse.mixture import mixture_distance
-from stages.reeb.level_sets import level_values
-from stages.reeb.prune import make_skeleton
-from stages.reeb.reeb_graph import reeb_graph
+from topomatch.stages.mesh.decimate import simplify_to_target
+from topomatch.stages.mesh.io import read_mesh
+from topomatch.stages.morse.mixture import mixture_distance
+from topomatch.stages.reeb.level_sets import level_values
+from topomatch.stages.reeb.prune import make_skeleton
+from topomatch.stages.reeb.reeb_graph import reeb_graph
 
 REPO = Path(__file__).resolve().parents[1]
 

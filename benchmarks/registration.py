@@ -36,12 +36,12 @@ from pathlib import Path
 
 import numpy as np
 
-from stages.registration.evaluate import EvaluateParams, evaluate_registration
-from stages.registration.io import read_image
-from stages.registration.misalign import moved, random_cases
-from stages.registration.register import LevelSpec, RegisterParams, register
-from stages.registration.simpleitk_reference import SimpleITKParams, sitk_register
-from stages.registration.transform import RigidTransform
+from topomatch.stages.registration.evaluate import EvaluateParams, evaluate_registration
+from topomatch.stages.registration.io import read_image
+from topomatch.stages.registration.misalign import moved, random_cases
+from topomatch.stages.registration.register import LevelSpec, RegisterParams, register
+from topomatch.stages.registration.simpleitk_reference import SimpleITKParams, sitk_register
+from topomatch.stages.registration.transform import RigidTransform
 
 REPO = Path(__file__).resolve().parents[1]
 ITK = REPO / "data" / "images" / "itk"

@@ -28,8 +28,8 @@ import tracemalloc
 
 import numpy as np
 
-from stages.retrieval.descriptor import Descriptor, MatchOptions
-from stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
+from topomatch.stages.retrieval.descriptor import Descriptor, MatchOptions
+from topomatch.stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
 
 
 def median_time(fn, repeat: int) -> float:
@@ -55,9 +55,9 @@ def simulated_fusion(n: int, rng: np.random.Generator) -> dict[str, list[Descrip
 
 
 def fused_benchmark(args, rng) -> None:
-    from pipeline.retrieval_cli import indexed_parts
-    from stages.retrieval.fusion import FUSIONS, fused_matrix, fused_query, median_scale
-    from stages.retrieval.methods import default_match_options
+    from topomatch.pipeline.retrieval_cli import indexed_parts
+    from topomatch.stages.retrieval.fusion import FUSIONS, fused_matrix, fused_query, median_scale
+    from topomatch.stages.retrieval.methods import default_match_options
 
     fusion = FUSIONS[args.method]
     rows, parts = indexed_parts(args.db, args.method)
@@ -108,7 +108,7 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    from stages.retrieval.fusion import FUSIONS
+    from topomatch.stages.retrieval.fusion import FUSIONS
 
     if args.method in FUSIONS:
         if not args.db:
@@ -117,7 +117,7 @@ def main() -> None:
         return
     options = MatchOptions(unmatched_cost=0.2)
     if args.db:
-        from pipeline.shape_index import ShapeIndex
+        from topomatch.pipeline.shape_index import ShapeIndex
 
         with ShapeIndex(args.db) as index:
             rows = index.rows(args.method)

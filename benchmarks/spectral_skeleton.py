@@ -48,9 +48,9 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from stages.mesh.io import read_mesh  # noqa: E402
-from stages.spectral.eigensolver import smallest_eigenpairs  # noqa: E402
-from stages.spectral.laplacian import laplacian  # noqa: E402
+from topomatch.stages.mesh.io import read_mesh  # noqa: E402
+from topomatch.stages.spectral.eigensolver import smallest_eigenpairs  # noqa: E402
+from topomatch.stages.spectral.laplacian import laplacian  # noqa: E402
 
 
 def default_mesh() -> Path:

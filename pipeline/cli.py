@@ -14,9 +14,9 @@ import json
 import sys
 from pathlib import Path
 
-from pipeline import __version__
-from pipeline.errors import RunError, TopomatchError
-from pipeline.paths import DATA_ROOT_ENV, data_root
+from topomatch import __version__
+from topomatch.pipeline.errors import RunError, TopomatchError
+from topomatch.pipeline.paths import DATA_ROOT_ENV, data_root
 
 
 def _add_config_args(p: argparse.ArgumentParser) -> None:
@@ -58,11 +58,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=cmd_stages)
 
-    from pipeline.retrieval_cli import add_parsers as add_retrieval
-    from pipeline.skeleton_cli import add_parser as add_skeleton
+    from topomatch.pipeline.retrieval_cli import add_parsers as add_retrieval
+    from topomatch.pipeline.skeleton_cli import add_parser as add_skeleton
 
     add_skeleton(sub)
-    from pipeline.register_cli import add_parser as add_register
+    from topomatch.pipeline.register_cli import add_parser as add_register
 
     add_register(sub)
     add_retrieval(sub)
@@ -70,8 +70,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from pipeline.config import load_experiment
-    from pipeline.runner import run_experiment
+    from topomatch.pipeline.config import load_experiment
+    from topomatch.pipeline.runner import run_experiment
 
     experiment = load_experiment(args.config, overrides=args.overrides, data_root=data_root(args.data_root))
     n = len(experiment.items())
@@ -97,7 +97,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from pipeline.config import load_experiment
+    from topomatch.pipeline.config import load_experiment
 
     experiment = load_experiment(args.config, overrides=args.overrides, data_root=data_root(args.data_root))
     print(f"{args.config}: ok ({experiment.name}: {len(experiment.inputs)} inputs, "
@@ -107,8 +107,8 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_stages(args: argparse.Namespace) -> int:
-    from pipeline.registry import describe_params, discover
-    from pipeline.reports import REPORTS
+    from topomatch.pipeline.registry import describe_params, discover
+    from topomatch.pipeline.reports import REPORTS
 
     stages = discover()
     listing = {

@@ -33,10 +33,10 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from pipeline.errors import ConfigError, InputError
-from pipeline.params import Params, validate_json_strict
-from pipeline.paths import display_path, resolve_input
-from pipeline.registry import StageSpec, get_stage
+from topomatch.pipeline.errors import ConfigError, InputError
+from topomatch.pipeline.params import Params, validate_json_strict
+from topomatch.pipeline.paths import display_path, resolve_input
+from topomatch.pipeline.registry import StageSpec, get_stage
 
 #: State entries that each kind of input provides before the first stage.
 INPUT_STATE = {
@@ -453,7 +453,7 @@ def _check_sweeps(raw: RawConfig, calls: tuple[StageCall, ...]) -> None:
 
 
 def _resolve_reports(raw: RawConfig) -> tuple[ReportCall, ...]:
-    from pipeline.reports import get_report
+    from topomatch.pipeline.reports import get_report
 
     out = []
     for i, entry in enumerate(raw.reports):

@@ -18,9 +18,9 @@ import os
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Iterator, Sequence
 
-from pipeline.config import ExecutorConfig, Item
-from pipeline.errors import ConfigError
-from pipeline.item import ItemResult, run_item
+from topomatch.pipeline.config import ExecutorConfig, Item
+from topomatch.pipeline.errors import ConfigError
+from topomatch.pipeline.item import ItemResult, run_item
 
 
 def default_workers() -> int:
@@ -57,7 +57,7 @@ def _local(items: Sequence[Item], cache_root: str | None, workers: int) -> Itera
             yield run_item(item, cache_root)
         return
     ctx = multiprocessing.get_context("forkserver")
-    ctx.set_forkserver_preload(["pipeline.item"])
+    ctx.set_forkserver_preload(["topomatch.pipeline.item"])
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_single_threaded) as pool:
         futures = [pool.submit(run_item, item, cache_root) for item in items]
         try:

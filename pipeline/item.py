@@ -9,10 +9,10 @@ import traceback
 from dataclasses import dataclass, field
 from typing import Any
 
-from pipeline.cache import Cache, hash_file, stage_key
-from pipeline.config import Item
-from pipeline.errors import TopomatchError
-from pipeline.registry import discover
+from topomatch.pipeline.cache import Cache, hash_file, stage_key
+from topomatch.pipeline.config import Item
+from topomatch.pipeline.errors import TopomatchError
+from topomatch.pipeline.registry import discover
 
 
 @dataclass

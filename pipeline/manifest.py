@@ -8,8 +8,8 @@ from datetime import datetime, timezone
 from importlib import metadata
 from typing import Any
 
-from pipeline.config import Experiment
-from pipeline.item import ItemResult
+from topomatch.pipeline.config import Experiment
+from topomatch.pipeline.item import ItemResult
 
 #: Distributions whose versions are recorded in every manifest.
 RECORDED_PACKAGES = (

@@ -13,7 +13,7 @@ from typing import Any, Mapping, TypeVar
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from pipeline.errors import ConfigError
+from topomatch.pipeline.errors import ConfigError
 
 P = TypeVar("P", bound="Params")
 

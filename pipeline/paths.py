@@ -14,7 +14,7 @@ import glob
 import os
 from pathlib import Path
 
-from pipeline.errors import ConfigError, InputError
+from topomatch.pipeline.errors import ConfigError, InputError
 
 DATA_ROOT_ENV = "TOPOMATCH_DATA_ROOT"
 

@@ -19,7 +19,7 @@ import json
 import sys
 from pathlib import Path
 
-from pipeline.errors import InputError, StageError, TopomatchError
+from topomatch.pipeline.errors import InputError, StageError, TopomatchError
 
 
 class RegistrationFlagged(TopomatchError):
@@ -63,8 +63,8 @@ def add_parser(sub) -> None:
 
 
 def cmd_register(args: argparse.Namespace) -> int:
-    from pipeline.config import build_experiment
-    from pipeline.item import run_item
+    from topomatch.pipeline.config import build_experiment
+    from topomatch.pipeline.item import run_item
 
     fixed, moving = Path(args.fixed), Path(args.moving)
     for path in (fixed, moving):
@@ -123,9 +123,9 @@ def write_outputs(out: Path, result, summary: dict) -> list[str]:
     import numpy as np
     from PIL import Image as PILImage
 
-    from pipeline.cache import atomic_write_bytes, atomic_write_text
-    from pipeline.registration_reports import overlay_figure
-    from stages.registration.interpolation import resample
+    from topomatch.pipeline.cache import atomic_write_bytes, atomic_write_text
+    from topomatch.pipeline.registration_reports import overlay_figure
+    from topomatch.stages.registration.interpolation import resample
 
     out.mkdir(parents=True, exist_ok=True)
     fixed, moving, reg = result.final("fixed"), result.final("moving"), result.final("registration")
@@ -148,6 +148,6 @@ def write_outputs(out: Path, result, summary: dict) -> list[str]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    from pipeline.cli import main
+    from topomatch.pipeline.cli import main
 
     sys.exit(main())

@@ -20,8 +20,8 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.reports import ReportOutput, report
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.reports import ReportOutput, report
 
 _NAME = dict(pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure or table")
 
@@ -59,7 +59,7 @@ def bernoulli_entropy_report(experiment, results, params: BernoulliEntropyParams
     """Fig. 2.2: Tsallis entropy of a Bernoulli distribution (p, 1 - p) for several alpha."""
     import matplotlib.pyplot as plt
 
-    from stages.registration.divergence import tsallis_entropy
+    from topomatch.stages.registration.divergence import tsallis_entropy
 
     p = np.linspace(0, 1, 401)
     P = np.column_stack([p, 1 - p])
@@ -90,7 +90,7 @@ def bernoulli_jt_report(experiment, results, params: BernoulliJTParams) -> Repor
     """Fig. 2.3: Jensen-Tsallis divergence of two Bernoulli distributions, equal weights (surface and contours)."""
     import matplotlib.pyplot as plt
 
-    from stages.registration.divergence import tsallis_entropy
+    from topomatch.stages.registration.divergence import tsallis_entropy
 
     g = np.linspace(0, 1, params.points)
     p, q = np.meshgrid(g, g, indexing="ij")
@@ -138,8 +138,8 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
     """Figs. 2.4-2.5: conditional distributions p_i of an image against itself moved by a few transforms."""
     import matplotlib.pyplot as plt
 
-    from stages.registration.divergence import conditionals, jensen_tsallis_histogram
-    from stages.registration.histogram import Binning, JointHistogram
+    from topomatch.stages.registration.divergence import conditionals, jensen_tsallis_histogram
+    from topomatch.stages.registration.histogram import Binning, JointHistogram
 
     figures, table = {}, []
     for r in results:
@@ -305,8 +305,8 @@ def overlay_rgb(fixed: np.ndarray, moving: np.ndarray) -> np.ndarray:
 
 def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
     """Five panels on ``axes``: fixed, moving, checkerboard before, checkerboard after, colour overlay after."""
-    from stages.registration.interpolation import resample
-    from stages.registration.transform import RigidTransform
+    from topomatch.stages.registration.interpolation import resample
+    from topomatch.stages.registration.transform import RigidTransform
 
     identity = RigidTransform.for_image(fixed.shape)
     before = resample(moving, identity.with_center(fixed.center), fixed.shape)

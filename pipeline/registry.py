@@ -18,39 +18,39 @@ import typing
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from pipeline.errors import ConfigError
-from pipeline.params import Params
+from topomatch.pipeline.errors import ConfigError
+from topomatch.pipeline.params import Params
 
 #: Modules that define stages and reports (imported by :func:`discover`).
 STAGE_MODULES: tuple[str, ...] = (
-    "stages.mesh.io",
-    "stages.mesh.clean",
-    "stages.mesh.decimate",
-    "stages.mesh.noise",
-    "stages.mesh.transform",
-    "stages.mesh.measures",
-    "stages.crosscheck.decimation",
-    "stages.spectral.laplacian",
-    "stages.spectral.fiedler",
-    "stages.spectral.spectrum",
-    "stages.spectral.heat_kernel",
-    "stages.morse.stage",
-    "stages.reeb.level_sets",
-    "stages.reeb.reeb_graph",
-    "stages.reeb.prune",
-    "stages.crosscheck.libigl_reference",
-    "stages.registration.io",
-    "stages.registration.misalign",
-    "stages.registration.register",
-    "stages.registration.simpleitk_reference",
-    "stages.registration.evaluate",
-    "stages.registration.landscape",
-    "stages.retrieval.descriptor",
-    "stages.retrieval.baseline_stages",
-    "pipeline.reports",
-    "pipeline.skeleton_reports",
-    "pipeline.retrieval_reports",
-    "pipeline.registration_reports",
+    "topomatch.stages.mesh.io",
+    "topomatch.stages.mesh.clean",
+    "topomatch.stages.mesh.decimate",
+    "topomatch.stages.mesh.noise",
+    "topomatch.stages.mesh.transform",
+    "topomatch.stages.mesh.measures",
+    "topomatch.stages.crosscheck.decimation",
+    "topomatch.stages.spectral.laplacian",
+    "topomatch.stages.spectral.fiedler",
+    "topomatch.stages.spectral.spectrum",
+    "topomatch.stages.spectral.heat_kernel",
+    "topomatch.stages.morse.stage",
+    "topomatch.stages.reeb.level_sets",
+    "topomatch.stages.reeb.reeb_graph",
+    "topomatch.stages.reeb.prune",
+    "topomatch.stages.crosscheck.libigl_reference",
+    "topomatch.stages.registration.io",
+    "topomatch.stages.registration.misalign",
+    "topomatch.stages.registration.register",
+    "topomatch.stages.registration.simpleitk_reference",
+    "topomatch.stages.registration.evaluate",
+    "topomatch.stages.registration.landscape",
+    "topomatch.stages.retrieval.descriptor",
+    "topomatch.stages.retrieval.baseline_stages",
+    "topomatch.pipeline.reports",
+    "topomatch.pipeline.skeleton_reports",
+    "topomatch.pipeline.retrieval_reports",
+    "topomatch.pipeline.registration_reports",
 )
 
 

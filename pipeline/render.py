@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.mesh import Mesh
 
 
 def face_shading(V: np.ndarray, F: np.ndarray, light: tuple[float, float, float] = (0.4, -0.5, 0.8)) -> np.ndarray:

@@ -26,9 +26,9 @@ from typing import Any, Callable, Literal
 
 from pydantic import Field
 
-from pipeline.cache import atomic_write_bytes, atomic_write_text
-from pipeline.errors import ConfigError
-from pipeline.params import Params
+from topomatch.pipeline.cache import atomic_write_bytes, atomic_write_text
+from topomatch.pipeline.errors import ConfigError
+from topomatch.pipeline.params import Params
 
 
 @dataclass
@@ -63,7 +63,7 @@ def report(name: str, *, params: type[Params]) -> Callable:
 
 
 def get_report(name: str) -> ReportSpec:
-    from pipeline.registry import discover
+    from topomatch.pipeline.registry import discover
 
     discover()
     try:
@@ -295,7 +295,7 @@ def mesh_gallery_report(experiment, results, params: MeshGalleryParams) -> Repor
     """The final mesh of every item (rows: inputs, columns: sweep points)."""
     import matplotlib.pyplot as plt
 
-    from pipeline.render import draw_mesh, z_up
+    from topomatch.pipeline.render import draw_mesh, z_up
 
     rows, cols, cells = gallery_layout(results, params.columns)
     fig = plt.figure(figsize=(params.panel_size * cols, params.panel_size * rows))

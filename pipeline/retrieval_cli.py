@@ -2,11 +2,11 @@
 
 - ``match A B``: dissimilarity of two meshes, the endpoint correspondence, both endpoint counts.
 - ``index PATHS... --db FILE``: descriptors of a collection into a SQLite index
-  (:mod:`pipeline.shape_index`), computed through the pipeline's executors and stage cache
+  (:mod:`topomatch.pipeline.shape_index`), computed through the pipeline's executors and stage cache
   (``FILE.cache/``); unchanged meshes are skipped, an interrupted index resumes, a bad mesh is
   recorded as failed with its reason.
 - ``query MESH --db FILE``: the ranked list of the closest indexed shapes.
-- a fused method (``--method topomatch``, :mod:`stages.retrieval.fusion`) indexes each of its
+- a fused method (``--method topomatch``, :mod:`topomatch.stages.retrieval.fusion`) indexes each of its
   parts and ranks by their fused, re-ranked dissimilarities.
 - ``evaluate --db FILE``: the full dissimilarity matrix of the labelled rows, PSB metrics, and
   the matrix written to an ``.npz`` file.
@@ -23,14 +23,14 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import ConfigError, InputError, StageError
+from topomatch.pipeline.errors import ConfigError, InputError, StageError
 
 MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 
 
 def _method_args(p: argparse.ArgumentParser, default: str = "srg") -> None:
-    from stages.retrieval.fusion import FUSIONS
-    from stages.retrieval.methods import METHODS
+    from topomatch.stages.retrieval.fusion import FUSIONS
+    from topomatch.stages.retrieval.methods import METHODS
 
     p.add_argument("--method", default=default, choices=sorted(METHODS) + sorted(FUSIONS),
                    help=f"descriptor: rgpd (mixture-distance skeleton, thesis ch. 3), srg (Fiedler skeleton, ch. 4), "
@@ -51,7 +51,7 @@ def _match_args(p: argparse.ArgumentParser) -> None:
 
 
 def _options(args):
-    from stages.retrieval.descriptor import MatchOptions
+    from topomatch.stages.retrieval.descriptor import MatchOptions
 
     return MatchOptions(correspondence=args.correspondence, dissimilarity=args.dissimilarity,
                         unmatched_cost=args.unmatched_cost, endpoint_window=args.endpoint_window)
@@ -105,8 +105,8 @@ def add_parsers(sub) -> None:
 
 def method_experiment(method: str, paths: list[Path], *, workers: int | None = 1, executor: str = "local"):
     """The experiment that computes ``method``'s descriptor for each mesh path."""
-    from pipeline.config import build_experiment
-    from stages.retrieval.methods import METHODS
+    from topomatch.pipeline.config import build_experiment
+    from topomatch.stages.retrieval.methods import METHODS
 
     return build_experiment({
         "name": f"index-{method}",
@@ -125,7 +125,7 @@ def params_of(experiment) -> tuple[dict, str]:
 
 def compute_descriptor(path: Path, method: str, cache: str | None):
     """Descriptor of one mesh (through the stage cache); raises StageError with the reason on failure."""
-    from pipeline.item import run_item
+    from topomatch.pipeline.item import run_item
 
     if not path.exists():
         raise InputError(path, "file not found")
@@ -144,15 +144,15 @@ def _cache_for(db: Path) -> str:
 
 
 def cmd_match(args) -> int:
-    from stages.matching.dissimilarity import match_features
-    from stages.retrieval.fusion import FUSIONS
+    from topomatch.stages.matching.dissimilarity import match_features
+    from topomatch.stages.retrieval.fusion import FUSIONS
 
     if args.method in FUSIONS:
         raise ConfigError(f"match: {args.method} is a fused method whose scales and re-ranking come from a "
                           f"collection; index the meshes and use query, or match with one of its parts "
                           f"({', '.join(FUSIONS[args.method].parts)})")
-    from stages.retrieval.methods import ENDPOINT_METHODS
-    from stages.retrieval.ranking import dissimilarities
+    from topomatch.stages.retrieval.methods import ENDPOINT_METHODS
+    from topomatch.stages.retrieval.ranking import dissimilarities
 
     da, _ = compute_descriptor(Path(args.a), args.method, None)
     db, _ = compute_descriptor(Path(args.b), args.method, None)
@@ -203,7 +203,7 @@ def _is_mesh(path: Path) -> bool:
 
 def part_methods(method: str) -> tuple[str, ...]:
     """The methods whose descriptors ``method`` needs: its fusion's parts, or itself."""
-    from stages.retrieval.fusion import FUSIONS
+    from topomatch.stages.retrieval.fusion import FUSIONS
 
     return FUSIONS[method].parts if method in FUSIONS else (method,)
 
@@ -218,14 +218,14 @@ def cmd_index(args) -> int:
 
     from tqdm import tqdm
 
-    from pipeline import executors
-    from pipeline.cache import hash_file
-    from pipeline.shape_index import ShapeIndex
+    from topomatch.pipeline import executors
+    from topomatch.pipeline.cache import hash_file
+    from topomatch.pipeline.shape_index import ShapeIndex
 
     files = mesh_files(args.paths)
     if not files:
         raise InputError(None, f"no mesh files ({', '.join(MESH_SUFFIXES)}, optionally .gz) in {' '.join(args.paths)}")
-    from pipeline.shape_index import read_labels
+    from topomatch.pipeline.shape_index import read_labels
 
     labels = read_labels(args.labels) if args.labels else {}
     db_path = Path(args.db)
@@ -274,8 +274,8 @@ def cmd_index(args) -> int:
 
 
 def _indexed(db: str, method: str):
-    from pipeline.shape_index import ShapeIndex
-    from stages.retrieval.descriptor import Descriptor
+    from topomatch.pipeline.shape_index import ShapeIndex
+    from topomatch.stages.retrieval.descriptor import Descriptor
 
     db_path = Path(db)
     if not db_path.exists():
@@ -305,24 +305,24 @@ def indexed_parts(db: str, method: str):
 
 def _part_options(part: str, method: str, args):
     """Matching options of one part: the user's for a single method, the part's defaults in a fusion."""
-    from stages.retrieval.fusion import FUSIONS
-    from stages.retrieval.methods import default_match_options
+    from topomatch.stages.retrieval.fusion import FUSIONS
+    from topomatch.stages.retrieval.methods import default_match_options
 
     return default_match_options(part) if method in FUSIONS else _options(args)
 
 
 def _matrix(method: str, descriptors: dict, args) -> np.ndarray:
     """Full dissimilarity matrix of ``method`` (fused and re-ranked for a fusion)."""
-    from stages.retrieval.fusion import FUSIONS, fused_matrix
-    from stages.retrieval.ranking import dissimilarity_matrix
+    from topomatch.stages.retrieval.fusion import FUSIONS, fused_matrix
+    from topomatch.stages.retrieval.ranking import dissimilarity_matrix
 
     parts = [dissimilarity_matrix(descriptors[p], p, _part_options(p, method, args)) for p in part_methods(method)]
     return fused_matrix(parts, FUSIONS[method]) if method in FUSIONS else parts[0]
 
 
 def cmd_query(args) -> int:
-    from stages.retrieval.fusion import FUSIONS, fused_query
-    from stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
+    from topomatch.stages.retrieval.fusion import FUSIONS, fused_query
+    from topomatch.stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
 
     rows, descriptors = indexed_parts(args.db, args.method)
     parts = part_methods(args.method)
@@ -353,7 +353,7 @@ def cmd_query(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from stages.retrieval.metrics import retrieval_metrics
+    from topomatch.stages.retrieval.metrics import retrieval_metrics
 
     rows, descriptors = indexed_parts(args.db, args.method)
     keep = [i for i, r in enumerate(rows) if r.label]
@@ -377,6 +377,6 @@ def cmd_evaluate(args) -> int:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    from pipeline.cli import main
+    from topomatch.pipeline.cli import main
 
     sys.exit(main())

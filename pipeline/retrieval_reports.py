@@ -1,8 +1,8 @@
 """Retrieval benchmark report: several descriptor methods of the same run compared on labelled meshes.
 
 For every method (a stage label whose result carries a ``descriptor``) and every fusion of
-methods (:mod:`stages.retrieval.fusion`) it computes the full dissimilarity matrix, the PSB
-metrics (:mod:`stages.retrieval.metrics`), and writes:
+methods (:mod:`topomatch.stages.retrieval.fusion`) it computes the full dissimilarity matrix, the PSB
+metrics (:mod:`topomatch.stages.retrieval.metrics`), and writes:
 
 - ``<name>_metrics``: micro and macro NN, FT, ST, E, DCG, mAP per method (table);
 - ``<name>_pr``: interpolated precision-recall curves of all methods (thesis Figs. 3.13 / 4.10);
@@ -21,11 +21,11 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import ConfigError
-from pipeline.params import Params
-from pipeline.paths import resolve_input
-from pipeline.reports import ReportOutput, report
-from pipeline.shape_index import read_labels
+from topomatch.pipeline.errors import ConfigError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.paths import resolve_input
+from topomatch.pipeline.reports import ReportOutput, report
+from topomatch.pipeline.shape_index import read_labels
 
 
 class RetrievalBenchmarkParams(Params):
@@ -60,8 +60,8 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
     """PSB metrics, precision-recall curves, a 7x7 dissimilarity table and top-10 grids per method."""
     import matplotlib.pyplot as plt
 
-    from stages.retrieval.fusion import Fusion, fused_matrix
-    from stages.retrieval.metrics import retrieval_metrics
+    from topomatch.stages.retrieval.fusion import Fusion, fused_matrix
+    from topomatch.stages.retrieval.metrics import retrieval_metrics
 
     labels = _labels(experiment, params.labels)
     items = [r for r in results if r.ok and str(Path(r.input_path).resolve()) in labels]
@@ -133,7 +133,7 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
 
 def _method_matrix(items, method: str, label: str, params) -> tuple[list[int], np.ndarray]:
     """Indices of the items that have ``label``'s descriptor, and their full dissimilarity matrix."""
-    from stages.retrieval.ranking import dissimilarity_matrix
+    from topomatch.stages.retrieval.ranking import dissimilarity_matrix
 
     kept = [i for i, r in enumerate(items) if label in r.results]
     descriptors = [items[i].results[label].descriptor for i in kept]
@@ -142,14 +142,14 @@ def _method_matrix(items, method: str, label: str, params) -> tuple[list[int], n
 
 def _comparison(method: str) -> str:
     """How a report method's descriptors compare: its own vector metric, or endpoint matching."""
-    from stages.retrieval.ranking import VECTOR_METHODS
+    from topomatch.stages.retrieval.ranking import VECTOR_METHODS
 
     return method if method in VECTOR_METHODS else "srg"  # endpoint descriptors share one comparison
 
 
 def _match_options(method: str, params):
     """Endpoint matching options of a report method (the params' unmatched cost, else the method's default)."""
-    from stages.retrieval.methods import default_match_options
+    from topomatch.stages.retrieval.methods import default_match_options
 
     cost = {} if params.unmatched_cost is None else {"unmatched_cost": params.unmatched_cost}
     return default_match_options(method, correspondence=params.correspondence, **cost)
@@ -165,7 +165,7 @@ def _restrict(matrix: tuple[list[int], np.ndarray], kept: list[int]) -> np.ndarr
 def _top10_grid(items, y, D, kept, where, queries, method):
     import matplotlib.pyplot as plt
 
-    from pipeline.render import draw_mesh
+    from topomatch.pipeline.render import draw_mesh
 
     fig = plt.figure(figsize=(11 * 1.3, len(queries) * 1.5))
     for row, q in enumerate(queries):
@@ -206,9 +206,9 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
     """
     import matplotlib.pyplot as plt
 
-    from stages.retrieval.fusion import Fusion, fused_query
-    from stages.retrieval.metrics import retrieval_metrics
-    from stages.retrieval.ranking import dissimilarities
+    from topomatch.stages.retrieval.fusion import Fusion, fused_query
+    from topomatch.stages.retrieval.metrics import retrieval_metrics
+    from topomatch.stages.retrieval.ranking import dissimilarities
 
     labels = _labels(experiment, params.labels)
     points = experiment.sweep_points()

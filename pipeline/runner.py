@@ -8,7 +8,7 @@ A run writes ``<out>/<config name>-<content hash>/``::
     figures/         PNG figures of the reports
     index.html       a page that shows all of it
 
-Stage results are cached by content hash (see :mod:`pipeline.cache`), so an
+Stage results are cached by content hash (see :mod:`topomatch.pipeline.cache`), so an
 interrupted run resumes where it stopped and a changed parameter recomputes
 only the stages downstream of it.
 """
@@ -25,12 +25,12 @@ from typing import Any
 import yaml
 from tqdm import tqdm
 
-from pipeline.cache import atomic_write_text
-from pipeline.config import Experiment
-from pipeline.executors import execute
-from pipeline.item import ItemResult
-from pipeline.manifest import build_manifest
-from pipeline.reports import write_report_outputs, write_index_html, write_table, run_reports
+from topomatch.pipeline.cache import atomic_write_text
+from topomatch.pipeline.config import Experiment
+from topomatch.pipeline.executors import execute
+from topomatch.pipeline.item import ItemResult
+from topomatch.pipeline.manifest import build_manifest
+from topomatch.pipeline.reports import write_report_outputs, write_index_html, write_table, run_reports
 
 DEFAULT_OUT = Path("runs")
 CACHE_DIRNAME = ".cache"

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.errors import InputError
+from topomatch.pipeline.errors import InputError
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS shapes (

@@ -14,7 +14,7 @@ import json
 import sys
 from pathlib import Path
 
-from pipeline.errors import InputError, StageError
+from topomatch.pipeline.errors import InputError, StageError
 
 
 def skeleton_config(mesh: Path, args: argparse.Namespace) -> dict:
@@ -53,8 +53,8 @@ def add_parser(sub) -> None:
 
 
 def cmd_skeleton(args: argparse.Namespace) -> int:
-    from pipeline.config import build_experiment
-    from pipeline.item import run_item
+    from topomatch.pipeline.config import build_experiment
+    from topomatch.pipeline.item import run_item
 
     mesh_path = Path(args.mesh)
     if not mesh_path.exists():
@@ -101,9 +101,9 @@ def write_outputs(out: Path, result, args) -> list[str]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pipeline.cache import atomic_write_bytes
-    from pipeline.skeleton_reports import SkeletonGalleryParams, draw_item
-    from stages.reeb.export import write_graphml, write_json, write_polyline
+    from topomatch.pipeline.cache import atomic_write_bytes
+    from topomatch.pipeline.skeleton_reports import SkeletonGalleryParams, draw_item
+    from topomatch.stages.reeb.export import write_graphml, write_json, write_polyline
 
     out.mkdir(parents=True, exist_ok=True)
     skeleton, reeb = result.results["prune"].skeleton, result.results["reeb_graph"].reeb
@@ -127,6 +127,6 @@ def write_outputs(out: Path, result, args) -> list[str]:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    from pipeline.cli import main
+    from topomatch.pipeline.cli import main
 
     sys.exit(main())

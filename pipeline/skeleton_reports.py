@@ -9,8 +9,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.reports import ReportOutput, gallery_layout, report
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.reports import ReportOutput, gallery_layout, report
 
 
 class SkeletonGalleryParams(Params):
@@ -29,7 +29,7 @@ class SkeletonGalleryParams(Params):
 
 def draw_item(ax, r, params: SkeletonGalleryParams) -> str:
     """Draw one item's mesh, function, iso-curves and graph; return a caption."""
-    from pipeline.render import UP_ORDER, draw_mesh, draw_skeleton, z_up
+    from topomatch.pipeline.render import UP_ORDER, draw_mesh, draw_skeleton, z_up
 
     mesh, function = r.final("mesh"), r.final("function")
     level_sets, reeb, skeleton = r.final("level_sets"), r.final("reeb"), r.final("skeleton")
@@ -47,7 +47,7 @@ def draw_item(ax, r, params: SkeletonGalleryParams) -> str:
         draw_skeleton(ax, skeleton.graph, endpoints=skeleton.endpoints, up_order=order)
         caption = f"{len(skeleton.endpoints)} endpoints, cycles {skeleton.cycle_rank}"
     elif reeb is not None:
-        from stages.reeb.prune import endpoints
+        from topomatch.stages.reeb.prune import endpoints
 
         ends = endpoints(reeb.graph)
         draw_skeleton(ax, reeb.graph, endpoints=ends, up_order=order)
@@ -191,10 +191,10 @@ def spectral_figures_report(experiment, results, params: SpectralFiguresParams) 
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
-    from pipeline.render import UP_ORDER, draw_mesh, z_up
-    from stages.reeb.level_sets import isolines, level_values
-    from stages.spectral.eigensolver import smallest_eigenpairs
-    from stages.spectral.laplacian import laplacian
+    from topomatch.pipeline.render import UP_ORDER, draw_mesh, z_up
+    from topomatch.stages.reeb.level_sets import isolines, level_values
+    from topomatch.stages.spectral.eigensolver import smallest_eigenpairs
+    from topomatch.stages.spectral.laplacian import laplacian
 
     unique = {r.input_path: r for r in reversed(results) if r.ok and r.final("mesh") is not None}
     items = [unique[p] for p in dict.fromkeys(r.input_path for r in results) if p in unique][: params.max_items]

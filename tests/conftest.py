@@ -10,7 +10,7 @@ from tests_paths import BUNDLED_MESHES
 @pytest.fixture
 def bundled_mesh():
     """``bundled_mesh(name)`` reads ``data/meshes/<name>`` of this repository into a Mesh."""
-    from stages.mesh.io import read_mesh
+    from topomatch.stages.mesh.io import read_mesh
 
     def load(name: str):
         path = BUNDLED_MESHES / name

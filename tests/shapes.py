@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.mesh import Mesh
 
 
 def octahedron() -> Mesh:

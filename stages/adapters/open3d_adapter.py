@@ -1,4 +1,4 @@
-"""Conversions between :class:`~stages.mesh.mesh.Mesh` and ``open3d.geometry.TriangleMesh``.
+"""Conversions between :class:`~topomatch.stages.mesh.mesh.Mesh` and ``open3d.geometry.TriangleMesh``.
 
 open3d stores vertices as ``Vector3dVector`` (float64) and triangles as
 ``Vector3iVector`` (int32); the conversion copies in both directions. open3d is
@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.mesh import Mesh
 
 if TYPE_CHECKING:  # pragma: no cover
     import open3d

@@ -1,4 +1,4 @@
-"""Conversions between :class:`~stages.mesh.mesh.Mesh` and ``pymeshlab.MeshSet``.
+"""Conversions between :class:`~topomatch.stages.mesh.mesh.Mesh` and ``pymeshlab.MeshSet``.
 
 A MeshSet holds a stack of meshes; :func:`to_meshset` makes a set with one mesh
 (the current one) and :func:`from_meshset` reads the *current* mesh back. pymeshlab
@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.mesh import Mesh
 
 if TYPE_CHECKING:  # pragma: no cover
     import pymeshlab

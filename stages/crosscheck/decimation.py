@@ -1,7 +1,7 @@
 """Cross-check of the ``decimate`` stage (fast-simplification) against MeshLab's quadric edge collapse.
 
 The input mesh is decimated to the same target twice: with
-:func:`stages.mesh.decimate.simplify_to_target` (exactly what ``decimate`` does)
+:func:`topomatch.stages.mesh.decimate.simplify_to_target` (exactly what ``decimate`` does)
 and with pymeshlab's ``meshing_decimation_quadric_edge_collapse``. The stage
 reports both face counts, the symmetric Hausdorff distance between the two
 results and each result's distance to the input, absolute and relative to the
@@ -30,12 +30,12 @@ from dataclasses import dataclass
 
 from pydantic import Field
 
-from pipeline.errors import StageError
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.decimate import DecimateParams, simplify_to_target
-from stages.mesh.measures import bbox_diagonal
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.decimate import DecimateParams, simplify_to_target
+from topomatch.stages.mesh.measures import bbox_diagonal
+from topomatch.stages.mesh.mesh import Mesh
 
 
 class DecimationCrosscheckParams(DecimateParams):
@@ -116,7 +116,7 @@ def meshlab_decimate(mesh: Mesh, target: int, *, preserve_normal: bool = True, p
     """
     import igl
 
-    from stages.adapters.pymeshlab_adapter import from_meshset, to_meshset
+    from topomatch.stages.adapters.pymeshlab_adapter import from_meshset, to_meshset
 
     if mesh.n_faces <= target:
         return mesh

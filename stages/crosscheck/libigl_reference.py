@@ -1,11 +1,11 @@
 """Cross-check of the spectral and level-set stages against libigl's own functions.
 
-- Eigenpairs: topomatch's :func:`~stages.spectral.laplacian.laplacian` +
-  :func:`~stages.spectral.eigensolver.smallest_eigenpairs` against the libigl
+- Eigenpairs: topomatch's :func:`~topomatch.stages.spectral.laplacian.laplacian` +
+  :func:`~topomatch.stages.spectral.eigensolver.smallest_eigenpairs` against the libigl
   path ``igl.cotmatrix`` + ``igl.massmatrix(FULL)`` + ``igl.spectra.eigs`` (smallest
   magnitude) on the same mesh: relative eigenvalue differences and, for each
   eigenvector whose eigenvalue is simple, 1 - |<phi_ours, phi_igl>_K| (all but the last pair).
-- Level sets: :func:`~stages.reeb.level_sets.isolines` against ``igl.isolines``
+- Level sets: :func:`~topomatch.stages.reeb.level_sets.isolines` against ``igl.isolines``
   on the same function and level values: per-level length difference and the
   largest distance between matching segment midpoints.
 """
@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
 
 
 def libigl_eigenpairs(V: np.ndarray, F: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -39,7 +39,7 @@ def isoline_differences(V, F, f, levels) -> dict:
     import igl
     from scipy.spatial import cKDTree
 
-    from stages.reeb.level_sets import isolines
+    from topomatch.stages.reeb.level_sets import isolines
 
     ours = isolines(V, F, f, levels)
     iV, iE, I = igl.isolines(V, F, f, levels[1:-1])
@@ -93,8 +93,8 @@ def libigl_reference(mesh, function, level_sets, *, params: LibiglReferenceParam
     """Compare our eigenpairs with igl.spectra.eigs and our level sets with igl.isolines."""
     import time
 
-    from stages.spectral.eigensolver import smallest_eigenpairs
-    from stages.spectral.laplacian import laplacian
+    from topomatch.stages.spectral.eigensolver import smallest_eigenpairs
+    from topomatch.stages.spectral.laplacian import laplacian
 
     k = params.eigenpairs
     t = time.perf_counter()

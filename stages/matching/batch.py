@@ -1,11 +1,11 @@
 """Dissimilarities of one query against many skeletons at once (vectorised).
 
 Endpoint feature sets have different sizes; they are padded to a common size
-with NaN rows, and the greedy correspondence (:mod:`stages.matching.correspondence`,
+with NaN rows, and the greedy correspondence (:mod:`topomatch.stages.matching.correspondence`,
 globally closest pair first) runs on all pairs together: each round takes, in
 every pair, the smallest cost among free rows and columns. ``min(n1, n2)``
 rounds of an argmin over (pairs, e1 * e2) costs. The result equals
-:func:`stages.matching.dissimilarity.match_features` with the same options
+:func:`topomatch.stages.matching.dissimilarity.match_features` with the same options
 (tested), up to ties between equal costs.
 """
 
@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.matching.correspondence import Correspondence
-from stages.matching.dissimilarity import Dissimilarity, match_features
+from topomatch.stages.matching.correspondence import Correspondence
+from topomatch.stages.matching.dissimilarity import Dissimilarity, match_features
 
 
 def pad_features(sets: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

@@ -19,7 +19,7 @@ from typing import Literal
 
 import numpy as np
 
-from stages.matching.correspondence import Correspondence, correspond, endpoint_costs
+from topomatch.stages.matching.correspondence import Correspondence, correspond, endpoint_costs
 
 Dissimilarity = Literal["matched", "double_sum"]
 

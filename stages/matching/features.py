@@ -23,8 +23,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from stages.reeb.prune import endpoints as graph_endpoints
-from stages.reeb.reeb_graph import ROOT
+from topomatch.stages.reeb.prune import endpoints as graph_endpoints
+from topomatch.stages.reeb.reeb_graph import ROOT
 
 
 @dataclass(frozen=True, eq=False)

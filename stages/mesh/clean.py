@@ -21,7 +21,7 @@ The repairs, in this order:
    one with the most faces (ties: the lowest component id), or fail;
 6. drop the vertices orphaned by steps 3–5.
 
-The topology of the mesh before and after (:func:`~stages.mesh.topology.topology_report`)
+The topology of the mesh before and after (:func:`~topomatch.stages.mesh.topology.topology_report`)
 is part of the result, so a run's table shows genus, components, Euler
 characteristic and manifoldness of every input.
 """
@@ -34,14 +34,14 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import InputError
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.measures import bbox_diagonal
-from stages.mesh.geometry import double_areas_and_sq_lengths
-from stages.mesh.mesh import Mesh
-from stages.mesh.topology import TopologyReport, topology_report
+from topomatch.pipeline.errors import InputError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.measures import bbox_diagonal
+from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.topology import TopologyReport, topology_report
 
 
 class CleanParams(Params):
@@ -166,7 +166,7 @@ def degenerate_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     -------
     (m,) bool
         True for faces with a repeated vertex index or a zero area, computed with the
-        stable Heron formula the Laplacian uses (:func:`stages.mesh.geometry.double_areas_and_sq_lengths`),
+        stable Heron formula the Laplacian uses (:func:`topomatch.stages.mesh.geometry.double_areas_and_sq_lengths`),
         so that every face the Laplacian would reject as degenerate is dropped here.
     """
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])

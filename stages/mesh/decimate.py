@@ -17,7 +17,7 @@ most the target. What it guarantees, and what this module adds:
   origin before decimating and back afterwards, which makes the result
   independent of the units, and (b) repeats the decimation on its own result
   (up to ``MAX_PASSES`` passes, while it makes progress). If the count is still
-  above ``target + tolerance`` a :class:`~pipeline.errors.StageError` says so.
+  above ``target + tolerance`` a :class:`~topomatch.pipeline.errors.StageError` says so.
   ``tolerance = max(2, 1% of the target)`` (:func:`target_tolerance`).
 - **Topology is not protected**: the collapses do not check the link condition,
   so at strong reductions the result can have non-manifold edges or a changed
@@ -39,12 +39,12 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field, model_validator
 
-from pipeline.errors import StageError
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.mesh import Mesh
-from stages.mesh.topology import edge_incidence
+from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.topology import edge_incidence
 
 #: Upper bound on the passes of fast-simplification over its own result.
 MAX_PASSES = 10

@@ -3,7 +3,7 @@
 libigl's ``read_triangle_mesh`` is the reader; open3d is the fallback for the PLY
 and STL variants libigl cannot read. Gzipped files are decompressed to a
 temporary file with the inner suffix. Every failure becomes an
-:class:`~pipeline.errors.InputError` naming the file and the problem.
+:class:`~topomatch.pipeline.errors.InputError` naming the file and the problem.
 """
 
 from __future__ import annotations
@@ -20,12 +20,12 @@ from typing import Iterator, Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import InputError
-from pipeline.paths import check_readable_file
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.errors import InputError
+from topomatch.pipeline.paths import check_readable_file
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.mesh import Mesh
 
 SUPPORTED_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 

@@ -12,10 +12,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.mesh import Mesh
 
 
 def bbox_diagonal(V: np.ndarray) -> float:
@@ -93,7 +93,7 @@ def mesh_measures(mesh: Mesh) -> MeshMeasures:
     """
     import igl
 
-    from stages.adapters.open3d_adapter import to_open3d
+    from topomatch.stages.adapters.open3d_adapter import to_open3d
 
     V, F = mesh.V, mesh.F
     if V.shape[0] == 0:

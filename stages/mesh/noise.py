@@ -18,11 +18,11 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.measures import bbox_diagonal, mean_edge_length
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.measures import bbox_diagonal, mean_edge_length
+from topomatch.stages.mesh.mesh import Mesh
 
 
 class NoiseParams(Params):

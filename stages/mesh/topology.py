@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.mesh import Mesh
 
 
 @dataclass(frozen=True)

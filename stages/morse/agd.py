@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.errors import StageError
-from stages.morse.function import MorseFunction, normalized
+from topomatch.pipeline.errors import StageError
+from topomatch.stages.morse.function import MorseFunction, normalized
 
 
 def average_geodesic_distance(V: np.ndarray, F: np.ndarray, *, sources: int = 256, seed: int = 0) -> MorseFunction:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.errors import StageError
-from stages.morse.centroid import CENTROIDS
-from stages.morse.function import MorseFunction, normalized
+from topomatch.pipeline.errors import StageError
+from topomatch.stages.morse.centroid import CENTROIDS
+from topomatch.stages.morse.function import MorseFunction, normalized
 
 
 def geodesic_from_centroid(V: np.ndarray, F: np.ndarray, *, centroid: str = "vertices") -> MorseFunction:

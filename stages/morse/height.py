@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.morse.function import MorseFunction, normalized
+from topomatch.stages.morse.function import MorseFunction, normalized
 
 
 def principal_height(V: np.ndarray) -> MorseFunction:

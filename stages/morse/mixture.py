@@ -24,9 +24,9 @@ from typing import Literal
 
 import numpy as np
 
-from pipeline.errors import StageError
-from stages.morse.centroid import CENTROIDS
-from stages.morse.function import MorseFunction, normalized
+from topomatch.pipeline.errors import StageError
+from topomatch.stages.morse.centroid import CENTROIDS
+from topomatch.stages.morse.function import MorseFunction, normalized
 
 
 def mixture_distance(
@@ -49,7 +49,7 @@ def mixture_distance(
     kind : {'mixture', 'euclidean', 'affine'}
         Which distance.
     centroid : {'vertices', 'area', 'enclosing_sphere'}
-        The centre c (see :mod:`stages.morse.centroid`).
+        The centre c (see :mod:`topomatch.stages.morse.centroid`).
     lam : float in (0, 1), optional
         Fixed mixture weight; None uses the data-dependent lambda.
     euclidean_scale : {'mean_squared_radius', 'none'}

@@ -8,11 +8,11 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.mesh import Mesh
-from stages.morse.function import MorseFunction
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.morse.function import MorseFunction
 
 
 class MorseParams(Params):
@@ -45,23 +45,23 @@ class MorseResult(StageResult):
 def morse_function(mesh: Mesh, params: MorseParams) -> MorseFunction:
     """Compute the function selected by ``params.function`` on ``mesh``."""
     if params.function in ("mixture", "euclidean", "affine"):
-        from stages.morse.mixture import mixture_distance
+        from topomatch.stages.morse.mixture import mixture_distance
 
         return mixture_distance(mesh.V, mesh.F, kind=params.function, centroid=params.centroid, lam=params.lam,
                                 euclidean_scale=params.euclidean_scale)
     if params.function == "height":
-        from stages.morse.height import principal_height
+        from topomatch.stages.morse.height import principal_height
 
         return principal_height(mesh.V)
     if params.function == "agd":
-        from stages.morse.agd import average_geodesic_distance
+        from topomatch.stages.morse.agd import average_geodesic_distance
 
         return average_geodesic_distance(mesh.V, mesh.F, sources=params.sources)
     if params.function == "geodesic":
-        from stages.morse.geodesic import geodesic_from_centroid
+        from topomatch.stages.morse.geodesic import geodesic_from_centroid
 
         return geodesic_from_centroid(mesh.V, mesh.F, centroid=params.centroid)
-    from stages.spectral.fiedler import fiedler_function
+    from topomatch.stages.spectral.fiedler import fiedler_function
 
     return fiedler_function(mesh, mass=params.mass)
 

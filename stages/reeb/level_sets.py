@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
 
 
 def level_values(f: np.ndarray, n_levels: int) -> np.ndarray:

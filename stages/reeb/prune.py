@@ -26,10 +26,10 @@ import networkx as nx
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.reeb.reeb_graph import ROOT, ReebGraph
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.reeb.reeb_graph import ROOT, ReebGraph
 
 
 def endpoints(G: nx.Graph) -> list:
@@ -104,7 +104,7 @@ class Skeleton:
     Attributes
     ----------
     graph : networkx.MultiGraph
-        Same attributes as :class:`~stages.reeb.reeb_graph.ReebGraph`.
+        Same attributes as :class:`~topomatch.stages.reeb.reeb_graph.ReebGraph`.
     endpoints : list
         Degree-1 nodes (root excluded).
     removed_branches : int

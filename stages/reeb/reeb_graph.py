@@ -20,7 +20,7 @@ levels and any triangle size:
 For a closed orientable surface of genus g and levels fine enough that no band
 contains a whole handle, the graph has exactly g independent cycles
 (``cycle_rank = E - V + C``). Node attributes come from closed forms
-(:mod:`stages.reeb.band_geometry`): exact ``area``, ``pos`` (area centroid) and
+(:mod:`topomatch.stages.reeb.band_geometry`): exact ``area``, ``pos`` (area centroid) and
 ``value`` (mean of f) of the band component, plus ``band`` and ``members``
 (the vertices whose value lies in the band).
 
@@ -41,12 +41,12 @@ from scipy.sparse import coo_matrix
 from pydantic import Field
 from scipy.sparse.csgraph import connected_components
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
 
-from stages.reeb.band_geometry import below
-from stages.reeb.level_sets import band_index
+from topomatch.stages.reeb.band_geometry import below
+from topomatch.stages.reeb.level_sets import band_index
 
 ROOT = "root"
 
@@ -334,7 +334,7 @@ def reeb_graph(
     f : (n,) float64
         Vertex values (linear on each triangle).
     levels : (N+1,) float64
-        Level values (see :func:`stages.reeb.level_sets.level_values`).
+        Level values (see :func:`topomatch.stages.reeb.level_sets.level_values`).
     root : (3,) float64, optional
         Position of a root node (the mixture distance's centre).
     root_mode : {'first_band', 'nearest', 'none'}

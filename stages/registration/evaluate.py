@@ -19,13 +19,13 @@ from typing import Any, Literal
 
 from pydantic import Field
 
-from pipeline.errors import StageError
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.registration.image import Image
-from stages.registration.register import Registration
-from stages.registration.transform import RigidTransform, target_registration_error
+from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.register import Registration
+from topomatch.stages.registration.transform import RigidTransform, target_registration_error
 
 TRUTH_KEYS = ("tx", "ty", "angle")
 

@@ -1,7 +1,7 @@
 """The image container of the registration stages: a 2D float64 array indexed [row, col] plus
 the physical size of a pixel.
 
-Coordinates used everywhere in :mod:`stages.registration`: a point is ``x = (col, row)`` in
+Coordinates used everywhere in :mod:`topomatch.stages.registration`: a point is ``x = (col, row)`` in
 pixel units (ITK's index order: x first), the centre of pixel ``[r, c]`` is ``(c, r)``, and the
 rotation centre of an image of ``H`` rows and ``W`` columns is ``((W - 1) / 2, (H - 1) / 2)``.
 """

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.registration.image import Image
-from stages.registration.transform import RigidTransform, grid_points
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.transform import RigidTransform, grid_points
 
 
 def bilinear(data: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

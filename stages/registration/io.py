@@ -8,7 +8,7 @@ to ``(k, j, i)``). A volume is reduced to 2D by ``slice_index`` along ``axis`` o
 that ``(k, j, i)`` array (axis 0 = slices); singleton axes are dropped. Colour images become
 their luminance ``0.299 R + 0.587 G + 0.114 B`` (alpha dropped).
 
-Every problem is an :class:`~pipeline.errors.InputError` naming the file: missing or
+Every problem is an :class:`~topomatch.pipeline.errors.InputError` naming the file: missing or
 unreadable file, unknown format, a 3D volume without a slice, an empty image, NaN or infinite
 pixels, a constant image (nothing to register), and in :func:`load_pair` a fixed and a moving
 image of different dimensionality.
@@ -22,12 +22,12 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import InputError
-from pipeline.paths import check_readable_file
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.registration.image import Image
+from topomatch.pipeline.errors import InputError
+from topomatch.pipeline.paths import check_readable_file
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.registration.image import Image
 
 PILLOW_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 NIFTI_SUFFIXES = (".nii", ".nii.gz")

@@ -13,13 +13,13 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.registration.divergence import similarity
-from stages.registration.histogram import Binning, JointHistogram
-from stages.registration.image import Image
-from stages.registration.interpolation import downsample
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.registration.divergence import similarity
+from topomatch.stages.registration.histogram import Binning, JointHistogram
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.interpolation import downsample
 
 PARAMETERS = ("tx", "ty", "angle")
 

@@ -2,7 +2,7 @@
 
 For a source image S and parameters theta the moving image is ``M(y) = S(T^{-1}(y))``, i.e.
 ``M(T(x)) = S(x)``: registering M to the fixed image S must return theta (ITK convention, see
-:mod:`stages.registration.transform`). Pixels whose preimage falls outside S are ``fill`` (0,
+:mod:`topomatch.stages.registration.transform`). Pixels whose preimage falls outside S are ``fill`` (0,
 the background of the bundled MRI slices). The resampling is a cubic B-spline by default, not
 the bilinear interpolation the registration uses, so the test is not answered by the same
 interpolation that made it.
@@ -20,13 +20,13 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import StageError
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.registration.image import Image
-from stages.registration.interpolation import resample
-from stages.registration.transform import RigidTransform
+from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.interpolation import resample
+from topomatch.stages.registration.transform import RigidTransform
 
 
 class MisalignParams(Params):

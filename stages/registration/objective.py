@@ -2,7 +2,7 @@
 transform parameters, at one or several resolutions.
 
 ``Objective(theta)`` with ``theta = (tx, ty, angle)`` (ITK convention, full-resolution pixels and
-degrees) returns the measure of :mod:`stages.registration.divergence` on the joint histogram of
+degrees) returns the measure of :mod:`topomatch.stages.registration.divergence` on the joint histogram of
 ``(fixed(x), moving(T(x)))`` over the fixed samples whose ``T(x)`` lies inside the moving image.
 If fewer than ``min_overlap`` of the fixed samples land inside, it returns ``-inf`` (an invalid
 transform, as in DIPY: the optimisers treat it as "do not go there") instead of a measure computed
@@ -20,10 +20,10 @@ from typing import Literal
 
 import numpy as np
 
-from stages.registration.divergence import Metric, Weights, similarity
-from stages.registration.histogram import Binning, Interpolation, JointHistogram
-from stages.registration.image import Image
-from stages.registration.interpolation import downsample
+from topomatch.stages.registration.divergence import Metric, Weights, similarity
+from topomatch.stages.registration.histogram import Binning, Interpolation, JointHistogram
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.interpolation import downsample
 
 
 class Objective:

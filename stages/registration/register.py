@@ -1,7 +1,7 @@
 """Coarse-to-fine rigid registration: any measure (JT, JR, MI, TMI) with any optimiser (SPSA, Powell).
 
 :func:`register` finds ``theta = (tx, ty, angle)`` (ITK convention, see
-:mod:`stages.registration.transform`) maximising the chosen measure of the joint histogram of
+:mod:`topomatch.stages.registration.transform`) maximising the chosen measure of the joint histogram of
 ``fixed(x)`` and ``moving(T_theta(x))``:
 
 1. **Initialisation**: ``moments`` maps the fixed image's intensity centroid onto the moving
@@ -29,7 +29,7 @@
    than the result's by ``capture_margin`` (relative) flags it. With ``retry`` the schedule then
    runs once more from that refined probe if it lies within the bounds (the first level
    continuing its gain sequence), and the check is repeated. ``on_failure: error`` turns a flag
-   into a :class:`~pipeline.errors.StageError`.
+   into a :class:`~topomatch.pipeline.errors.StageError`.
 """
 
 from __future__ import annotations
@@ -42,15 +42,15 @@ from typing import Callable, Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import StageError
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.registration.image import Image
-from stages.registration.objective import build_pyramid, intensity_centroid, rms_radius
-from stages.registration.powell import PowellSettings, powell_maximize
-from stages.registration.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from stages.registration.transform import RigidTransform, rotation_matrix
+from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.objective import build_pyramid, intensity_centroid, rms_radius
+from topomatch.stages.registration.powell import PowellSettings, powell_maximize
+from topomatch.stages.registration.spsa import OptimizeResult, SPSASettings, spsa_maximize
+from topomatch.stages.registration.transform import RigidTransform, rotation_matrix
 
 
 class LevelSpec(Params):

@@ -1,6 +1,6 @@
 """The reference: SimpleITK's Mattes mutual-information rigid registration, on the same images.
 
-The adapter between :class:`~stages.registration.image.Image` and ``SimpleITK.Image`` lives here
+The adapter between :class:`~topomatch.stages.registration.image.Image` and ``SimpleITK.Image`` lives here
 (origin 0, spacing 1, identity direction: pixel units, so that parameters compare directly with
 ours). The registration is the textbook SimpleITK set-up (the SimpleITK notebooks'
 "registration initialization" recipe):
@@ -16,7 +16,7 @@ ours). The registration is the textbook SimpleITK set-up (the SimpleITK notebook
   plain gradient descent with a per-iteration learning-rate estimate oscillated by ~2 px here;
 - a ``shrink`` pyramid with Gaussian ``smoothing`` (sigmas in pixels).
 
-The result is a :class:`~stages.registration.register.Registration` (method
+The result is a :class:`~topomatch.stages.registration.register.Registration` (method
 ``simpleitk/mattes``); SimpleITK reports no failure flag, so ``ok`` is False only when the result
 leaves less than ``min_overlap`` of the fixed image overlapping the moving one or SimpleITK raises.
 """
@@ -31,12 +31,12 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.registration.image import Image
-from stages.registration.register import Registration
-from stages.registration.transform import RigidTransform, grid_points
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.register import Registration
+from topomatch.stages.registration.transform import RigidTransform, grid_points
 
 
 def to_sitk(image: Image | np.ndarray):

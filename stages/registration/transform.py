@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stages.registration.image import image_center
+from topomatch.stages.registration.image import image_center
 
 
 def rotation_matrix(angle_deg: float) -> np.ndarray:

@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from stages.retrieval.baselines import d2, shapedna, spherical_harmonics
-from stages.retrieval.descriptor import Descriptor, DescriptorResult
-from pipeline.registry import stage
+from topomatch.stages.retrieval.baselines import d2, shapedna, spherical_harmonics
+from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
+from topomatch.pipeline.registry import stage
 
 
 @stage("d2", params=d2.D2Params, version=1, consumes=("mesh",), produces=("descriptor",))

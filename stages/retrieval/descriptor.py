@@ -2,7 +2,7 @@
 
 A :class:`Descriptor` is either the endpoint features of a skeleton (RGPD: mixture
 distance; SRG: Fiedler vector; compared by endpoint correspondence, see
-:mod:`stages.matching`) or a fixed-length vector (the baselines D2, spherical
+:mod:`topomatch.stages.matching`) or a fixed-length vector (the baselines D2, spherical
 harmonics and ShapeDNA, compared by a vector distance). The ``descriptor`` state
 entry carries it from the stage that computes it to the index.
 """
@@ -15,11 +15,11 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.matching.features import endpoint_features, endpoint_signatures
-from stages.spectral.heat_kernel import HKSTimes, heat_kernel_signature
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.matching.features import endpoint_features, endpoint_signatures
+from topomatch.stages.spectral.heat_kernel import HKSTimes, heat_kernel_signature
 
 
 @dataclass(frozen=True, eq=False)

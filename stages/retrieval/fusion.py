@@ -34,7 +34,7 @@ class Fusion:
     Attributes
     ----------
     parts : tuple of str
-        Method names (keys of :data:`stages.retrieval.methods.METHODS`), equally weighted.
+        Method names (keys of :data:`topomatch.stages.retrieval.methods.METHODS`), equally weighted.
     rerank_k : int or None
         Neighbours of the manifold-ranking graph; None = no re-ranking.
     rerank_alpha : float

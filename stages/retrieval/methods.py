@@ -8,7 +8,7 @@ signature of each endpoint) and ``hks`` (heat-kernel-signature histograms) work 
 copy decimated to 6,000 faces and share its spectrum through the cache. Each chain is
 an ordinary stage list, so indexing runs through the pipeline's executors and cache.
 
-:data:`FUSIONS` (from :mod:`stages.retrieval.fusion`) are methods made of other methods:
+:data:`FUSIONS` (from :mod:`topomatch.stages.retrieval.fusion`) are methods made of other methods:
 ``topomatch`` fuses agd, hks, shapedna, d2 and sh and re-ranks by manifold ranking.
 """
 
@@ -62,8 +62,8 @@ UNMATCHED_COST = {"rgpd": 0.2, "srg": 0.2, "agd": 0.5}
 
 
 def default_match_options(method: str, **overrides):
-    """The :class:`~stages.retrieval.descriptor.MatchOptions` a method is compared with by default
+    """The :class:`~topomatch.stages.retrieval.descriptor.MatchOptions` a method is compared with by default
     (its unmatched-endpoint cost; vector methods ignore the options), with ``overrides``."""
-    from stages.retrieval.descriptor import MatchOptions
+    from topomatch.stages.retrieval.descriptor import MatchOptions
 
     return MatchOptions(**{"unmatched_cost": UNMATCHED_COST.get(method, 0.0), **overrides})

@@ -1,20 +1,20 @@
 """Dissimilarities between descriptors: one query against an index, or all pairs.
 
 Endpoint descriptors (RGPD, SRG) are compared by endpoint correspondence
-(:mod:`stages.matching.batch`, vectorised); with ``endpoint_window`` set, pairs
+(:mod:`topomatch.stages.matching.batch`, vectorised); with ``endpoint_window`` set, pairs
 whose endpoint counts differ by more than the window get an infinite
 dissimilarity (thesis §3.4 indexing). Vector descriptors use their baseline's
-metric (:data:`stages.retrieval.baselines.BASELINES`).
+metric (:data:`topomatch.stages.retrieval.baselines.BASELINES`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from stages.matching.batch import one_to_many, pad_features
-from stages.retrieval.baselines import BASELINES
-from stages.retrieval.descriptor import Descriptor, MatchOptions
-from stages.spectral import heat_kernel
+from topomatch.stages.matching.batch import one_to_many, pad_features
+from topomatch.stages.retrieval.baselines import BASELINES
+from topomatch.stages.retrieval.descriptor import Descriptor, MatchOptions
+from topomatch.stages.spectral import heat_kernel
 
 #: Index method name -> the (n, m) distance matrix of its vector descriptors.
 VECTOR_METHODS = {

@@ -1,11 +1,11 @@
 """Spectral geometry (thesis ch. 4): the FEM Laplace–Beltrami operator and its smallest eigenpairs.
 
-- :mod:`stages.spectral.laplacian`: cotangent stiffness ``Q = -igl.cotmatrix`` and mass
+- :mod:`topomatch.stages.spectral.laplacian`: cotangent stiffness ``Q = -igl.cotmatrix`` and mass
   ``K`` (consistent FEM "area matrix" or Voronoi lumped), with input validation;
   stage ``laplacian``.
-- :mod:`stages.spectral.eigensolver`: smallest generalised eigenpairs ``Q phi = lambda K phi``
+- :mod:`topomatch.stages.spectral.eigensolver`: smallest generalised eigenpairs ``Q phi = lambda K phi``
   (shift-invert block Krylov, multilevel, LOBPCG + AMG, dense) and the sign rule.
-- :mod:`stages.spectral.fiedler`: the Fiedler vector ``phi2`` as a Morse function; stage ``fiedler``.
+- :mod:`topomatch.stages.spectral.fiedler`: the Fiedler vector ``phi2`` as a Morse function; stage ``fiedler``.
 
 See ``docs/spectral.md`` for the design and the measured speed.
 """

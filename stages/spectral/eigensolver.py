@@ -1,7 +1,7 @@
 """Smallest generalised eigenpairs ``Q phi = lambda K phi`` of a mesh Laplacian.
 
 ``Q`` symmetric positive semidefinite with the constants as its kernel (a connected
-mesh), ``K`` symmetric positive definite (:mod:`stages.spectral.laplacian`). Results
+mesh), ``K`` symmetric positive definite (:mod:`topomatch.stages.spectral.laplacian`). Results
 (:class:`Eigenpairs`) follow one convention whatever the method:
 
 - ``values`` ascending, ``values[0] = 0`` exactly and ``vectors[:, 0]`` the exact
@@ -88,7 +88,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from pipeline.errors import StageError
+from topomatch.pipeline.errors import StageError
 
 Method = Literal["auto", "shift_invert", "multilevel", "lobpcg", "dense"]
 SignRule = Literal["skewness", "max_abs"]
@@ -637,9 +637,9 @@ def _multilevel(prob: _Problem, nev: int, *, tol: float, maxiter: int, V: np.nda
                 backend: str) -> _Raw:
     if V is None or F is None:
         raise _NotConverged("the multilevel method needs the mesh (V and F)")
-    from stages.mesh.decimate import simplify_to_target
-    from stages.mesh.geometry import double_areas_and_sq_lengths
-    from stages.spectral.laplacian import _assemble, _components
+    from topomatch.stages.mesh.decimate import simplify_to_target
+    from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
+    from topomatch.stages.spectral.laplacian import _assemble, _components
 
     target = min(coarse_vertices, prob.n // 4)
     if target < 100:

@@ -1,7 +1,7 @@
 """The Fiedler vector ``phi2`` of the Laplace–Beltrami operator as a Morse function (thesis ch. 4).
 
 ``phi2`` is the eigenvector of the second smallest eigenvalue of ``Q phi = lambda K phi``
-(:mod:`stages.spectral.laplacian`, :mod:`stages.spectral.eigensolver`): K-normalised
+(:mod:`topomatch.stages.spectral.laplacian`, :mod:`topomatch.stages.spectral.eigensolver`): K-normalised
 (``phi2^T K phi2 = 1``), sign fixed by the eigensolver's sign rule (default: positive
 K-weighted skewness). It is invariant under rotations and translations; under a uniform
 scale ``s`` it becomes ``phi2 / s`` (and ``lambda -> lambda / s^2``), so its level sets do
@@ -22,13 +22,13 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.mesh import Mesh
-from stages.morse.function import MorseFunction
-from stages.spectral.eigensolver import Eigenpairs, relative_gap, smallest_eigenpairs
-from stages.spectral.laplacian import MassType, laplacian
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.morse.function import MorseFunction
+from topomatch.stages.spectral.eigensolver import Eigenpairs, relative_gap, smallest_eigenpairs
+from topomatch.stages.spectral.laplacian import MassType, laplacian
 
 
 class FiedlerParams(Params):

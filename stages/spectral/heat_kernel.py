@@ -2,7 +2,7 @@
 
 Sun, Ovsjanikov, Guibas, "A concise and provably informative multi-scale signature based on heat
 diffusion", SGP 2009: ``h_t(x) = sum_i exp(-lambda_i t) phi_i(x)^2`` over the eigenpairs of the
-Laplace-Beltrami operator (:mod:`stages.spectral.spectrum`). It is an isometry invariant, so it
+Laplace-Beltrami operator (:mod:`topomatch.stages.spectral.spectrum`). It is an isometry invariant, so it
 does not change when an articulated shape bends.
 
 Scale: times are given in units of the surface area (``t = tau * A``), so ``lambda_i t`` does not
@@ -20,9 +20,9 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from pipeline.registry import stage
-from stages.spectral.spectrum import Spectrum
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.stages.spectral.spectrum import Spectrum
 
 
 def heat_kernel_signature(spectrum: Spectrum, times: np.ndarray) -> np.ndarray:
@@ -63,7 +63,7 @@ def hks_histograms(spectrum: Spectrum, params: HKSParams) -> np.ndarray:
 
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
     """(n, m) L1 distances between HKS histogram rows."""
-    from stages.retrieval.baselines.vectors import pairwise
+    from topomatch.stages.retrieval.baselines.vectors import pairwise
 
     return pairwise(X, Y, metric="cityblock")
 
@@ -71,6 +71,6 @@ def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
 @stage("hks", params=HKSParams, version=1, consumes=("spectrum",), produces=("descriptor",))
 def hks_stage(spectrum: Spectrum, *, params: HKSParams):
     """Heat-kernel-signature histograms (Sun et al. 2009), scale-normalised."""
-    from stages.retrieval.descriptor import Descriptor, DescriptorResult
+    from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
 
     return DescriptorResult(Descriptor("vector", hks_histograms(spectrum, params)))

@@ -12,7 +12,7 @@ Conventions (thesis ch. 4, written once here):
   ``igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_FULL)``. ``mass="voronoi"`` is libigl's
   diagonal mixed-Voronoi lumped mass (``MASSMATRIX_TYPE_VORONOI``). Both sum to the
   surface area: ``1^T K 1 = area``.
-- The eigenproblem is ``Q phi = lambda K phi`` (see :mod:`stages.spectral.eigensolver`).
+- The eigenproblem is ``Q phi = lambda K phi`` (see :mod:`topomatch.stages.spectral.eigensolver`).
 
 Assembly. ``Q`` and the full ``K`` are assembled here with vectorised numpy (same
 formulas as libigl: squared edge lengths, Kahan's stable Heron formula for the double
@@ -22,7 +22,7 @@ the 48k-vertex horse this takes about 30 ms against about 90 ms for ``igl.cotmat
 comes from ``igl.massmatrix``.
 
 Validation (:func:`check_mesh`), before anything is solved, with an
-:class:`~pipeline.errors.InputError` naming the mesh:
+:class:`~topomatch.pipeline.errors.InputError` naming the mesh:
 
 - no vertices or no faces; non-finite coordinates; face indices out of range;
 - vertices used by no face (their row of ``K`` is zero, so ``K`` is singular);
@@ -46,12 +46,12 @@ import numpy as np
 import scipy.sparse as sp
 from pydantic import Field
 
-from pipeline.errors import InputError
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.geometry import double_areas_and_sq_lengths
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.errors import InputError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
+from topomatch.stages.mesh.mesh import Mesh
 
 MassType = Literal["full", "voronoi"]
 

@@ -1,10 +1,10 @@
 """The leading Laplace-Beltrami eigenpairs of a mesh, kept for signatures (``spectrum`` stage).
 
 ``Q phi = lambda K phi`` with the cotangent stiffness ``Q = -igl.cotmatrix`` and the mass ``K``
-(:func:`stages.spectral.laplacian.laplacian`), the ``k + 1`` smallest eigenpairs (the constant
+(:func:`topomatch.stages.spectral.laplacian.laplacian`), the ``k + 1`` smallest eigenpairs (the constant
 ``phi_0``, ``lambda_0 = 0`` included), K-orthonormal. Solved by ARPACK (``eigsh``) in
 shift-invert mode around a slightly negative shift, with ``Q - sigma K`` factorised once by the
-project's :class:`~stages.spectral.eigensolver.ShiftInvert` (qdldl LDL^T: faster solves than
+project's :class:`~topomatch.stages.spectral.eigensolver.ShiftInvert` (qdldl LDL^T: faster solves than
 the LL^T the Fiedler solver prefers, which matters for ARPACK's ~100 solves). The Fiedler stage uses
 a block solver tuned for 2-3 eigenpairs; for tens of eigenpairs ARPACK is the better tool.
 
@@ -20,11 +20,11 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import StageError
-from pipeline.params import Params
-from pipeline.registry import stage
-from pipeline.result import StageResult
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import stage
+from topomatch.pipeline.result import StageResult
+from topomatch.stages.mesh.mesh import Mesh
 
 #: Problems with at most this many vertices are solved densely (scipy.linalg.eigh).
 DENSE_MAX = 400
@@ -57,7 +57,7 @@ def shift_invert_eigsh(Q, K, nev: int, sigma: float, name: str, *, vectors: bool
     import scipy.linalg as la
     import scipy.sparse.linalg as sla
 
-    from stages.spectral.eigensolver import ShiftInvert
+    from topomatch.stages.spectral.eigensolver import ShiftInvert
 
     n = Q.shape[0]
     # Lanczos finds the copies of an exactly repeated eigenvalue (symmetric shapes) only through
@@ -116,7 +116,7 @@ def mesh_spectrum(mesh: Mesh, k: int, mass: Literal["full", "voronoi"] = "vorono
     StageError
         Fewer than ``k + 1`` vertices, or ARPACK failed.
     """
-    from stages.spectral.laplacian import laplacian
+    from topomatch.stages.spectral.laplacian import laplacian
 
     lap = laplacian(mesh, mass)
     if lap.n < k + 1:

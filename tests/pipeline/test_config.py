@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.config import apply_overrides, build_experiment, load_experiment
-from pipeline.errors import ConfigError, InputError
-from pipeline.paths import data_root
+from topomatch.pipeline.config import apply_overrides, build_experiment, load_experiment
+from topomatch.pipeline.errors import ConfigError, InputError
+from topomatch.pipeline.paths import data_root
 
 REPO = Path(__file__).resolve().parents[2]
 CONFIGS = sorted((REPO / "configs").rglob("*.yaml"))

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from pipeline.errors import ConfigError
-from pipeline.registry import describe_params, discover, get_stage
-from pipeline.reports import REPORTS
+from topomatch.pipeline.errors import ConfigError
+from topomatch.pipeline.registry import describe_params, discover, get_stage
+from topomatch.pipeline.reports import REPORTS
 
 MINIMAL_PARAMS = {"decimate": {"ratio": 0.5}, "decimate_crosscheck": {"ratio": 0.5}}
 FOUNDATION_STAGES = {"load", "clean", "decimate", "decimate_crosscheck", "noise", "transform", "measures"}

@@ -9,7 +9,7 @@ import sqlite3
 import numpy as np
 import pytest
 
-from pipeline.cli import main
+from topomatch.pipeline.cli import main
 from tests_paths import BUNDLED_MESHES
 
 MESHES = ["torus.off", "eight_genus2.off", "odedstein_human_man.obj.gz", "odedstein_human_woman.obj.gz",
@@ -70,7 +70,7 @@ def test_bad_mesh_is_recorded_and_the_others_indexed(collection, tmp_path, capsy
 
 
 def test_interrupted_index_resumes(collection, tmp_path, capsys, monkeypatch):
-    import pipeline.executors as ex
+    import topomatch.pipeline.executors as ex
 
     db = tmp_path / "index.db"
 

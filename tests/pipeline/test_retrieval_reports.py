@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from pipeline.config import build_experiment
-from pipeline.runner import run_experiment
+from topomatch.pipeline.config import build_experiment
+from topomatch.pipeline.runner import run_experiment
 from tests_paths import BUNDLED_MESHES
 
 LABELS = {"torus.off": "handles", "eight_genus2.off": "handles", "odedstein_hand_lowres.obj.gz": "handles",

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from pydantic import Field
 
-from pipeline.config import build_experiment
-from pipeline.params import Params
-from pipeline.registry import STAGES, discover, stage
-from pipeline.result import StageResult
-from pipeline.runner import run_experiment
+from topomatch.pipeline.config import build_experiment
+from topomatch.pipeline.params import Params
+from topomatch.pipeline.registry import STAGES, discover, stage
+from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.runner import run_experiment
 
 
 def _run(config: dict, tmp_path, **kw):
@@ -158,7 +158,7 @@ def test_pool_workers_use_one_blas_thread():
     # numpy's and scipy's OpenBLAS both limited in a worker process (no oversubscription)
     import multiprocessing
 
-    from pipeline.executors import _single_threaded
+    from topomatch.pipeline.executors import _single_threaded
 
     ctx = multiprocessing.get_context("forkserver")
     with ctx.Pool(1, initializer=_single_threaded) as pool:

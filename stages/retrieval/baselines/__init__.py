@@ -1,6 +1,6 @@
 """Baseline shape descriptors measured side by side with the thesis methods.
 
-Each module has a frozen params class (a :class:`pipeline.params.Params`), a pure
+Each module has a frozen params class (a :class:`topomatch.pipeline.params.Params`), a pure
 ``descriptor(mesh, params) -> np.ndarray``, a ``distance(a, b) -> float`` and a vectorised
 ``distance_matrix(X, Y=None) -> (n, m)``:
 
@@ -23,8 +23,8 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from pipeline.params import Params
-from stages.retrieval.baselines import d2, shapedna, spherical_harmonics
+from topomatch.pipeline.params import Params
+from topomatch.stages.retrieval.baselines import d2, shapedna, spherical_harmonics
 
 
 class Baseline(NamedTuple):

@@ -7,7 +7,7 @@ points on the surface.
 Definition used here
 --------------------
 1. Draw ``2 n_pairs`` points uniformly on the surface (area-weighted triangle choice,
-   uniform barycentric point, :func:`~stages.retrieval.baselines.sampling.sample_surface`)
+   uniform barycentric point, :func:`~topomatch.stages.retrieval.baselines.sampling.sample_surface`)
    from ``numpy.random.default_rng(seed)``; pair point ``i`` with point ``n_pairs + i``.
 2. Normalise for scale by the **mean** of the sampled distances (Osada et al.'s "normalisation
    by mean", sec. 5.2): ``x = d / mean(d)``. Translation and rotation invariance are built in.
@@ -35,10 +35,10 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from pipeline.params import Params
-from stages.mesh.mesh import Mesh
-from stages.retrieval.baselines.sampling import checked_areas, sample_surface
-from stages.retrieval.baselines.vectors import pairwise
+from topomatch.pipeline.params import Params
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.retrieval.baselines.sampling import checked_areas, sample_surface
+from topomatch.stages.retrieval.baselines.vectors import pairwise
 
 
 class D2Params(Params):

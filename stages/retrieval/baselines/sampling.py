@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.errors import InputError
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.errors import InputError
+from topomatch.stages.mesh.mesh import Mesh
 
 
 def triangle_areas(V: np.ndarray, F: np.ndarray) -> np.ndarray:

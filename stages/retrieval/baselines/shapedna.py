@@ -10,8 +10,8 @@ Definition used here
    stiffness ``Q = -igl.cotmatrix`` (PSD) and the mass ``K``: the consistent FEM mass matrix
    (``mass='full'``, ``igl.massmatrix(..., FULL)``, default; Reuter et al. use FEM mass
    matrices, of cubic elements) or libigl's lumped Voronoi mass (``mass='voronoi'``). The
-   matrices come from :func:`stages.spectral.laplacian.laplacian`, which validates the mesh
-   (degenerate triangles, unreferenced vertices -> :class:`~pipeline.errors.InputError` that
+   matrices come from :func:`topomatch.stages.spectral.laplacian.laplacian`, which validates the mesh
+   (degenerate triangles, unreferenced vertices -> :class:`~topomatch.pipeline.errors.InputError` that
    names the ``clean`` fix). Linear elements with the full mass over-estimate the eigenvalues
    by O(h^2) (0.02 % for ``l = 1``, 0.7 % for ``l = 4`` on a 2,562-vertex icosphere).
 2. **Eigenvalues.** The ``k`` [30] smallest **non-zero** eigenvalues. Each connected component
@@ -22,7 +22,7 @@ Definition used here
    ``4 pi / A`` is the Weyl-law spacing of the spectrum of a surface of area ``A``, so the
    shift scales with the shape), with a fixed start vector (deterministic), and the zero is
    dropped; components of at most 400 vertices are solved densely. ``Q - sigma K`` is factorised once by the project's
-   :class:`~stages.spectral.eigensolver.ShiftInvert` (qdldl sparse LDL^T, ~1.7x faster than
+   :class:`~topomatch.stages.spectral.eigensolver.ShiftInvert` (qdldl sparse LDL^T, ~1.7x faster than
    eigsh's own SuperLU; SuperLU when qdldl is missing).
 3. **Scale normalisation** (``normalization``): ``'area_index'`` [default] multiplies by the
    surface area and divides by the index, ``lambda_i * A / i`` (i = 1..k); ``'area'`` only
@@ -50,10 +50,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from pipeline.errors import StageError
-from pipeline.params import Params
-from stages.mesh.mesh import Mesh
-from stages.retrieval.baselines.vectors import pairwise
+from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.params import Params
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.retrieval.baselines.vectors import pairwise
 
 Normalization = Literal["area", "area_index", "none"]
 
@@ -74,7 +74,7 @@ def _component_nonzero_eigenvalues(Q, K, want: int, sigma: float, name: str) -> 
 
     Fewer are returned when the component has fewer than ``want + 1`` vertices.
     """
-    from stages.spectral.spectrum import shift_invert_eigsh
+    from topomatch.stages.spectral.spectrum import shift_invert_eigsh
 
     return shift_invert_eigsh(Q, K, min(want + 1, Q.shape[0]), sigma, name)[1:]
 
@@ -112,14 +112,14 @@ def eigenvalues(mesh: Mesh, k: int, mass: Literal["full", "voronoi"] = "full") -
     Raises
     ------
     InputError
-        Mesh rejected by :func:`stages.spectral.laplacian.laplacian` (names the mesh).
+        Mesh rejected by :func:`topomatch.stages.spectral.laplacian.laplacian` (names the mesh).
     StageError
         Fewer than ``k`` non-zero eigenvalues exist (too few vertices), or ARPACK failed.
     """
     import scipy.sparse as sp
     from scipy.sparse.csgraph import connected_components
 
-    from stages.spectral.laplacian import laplacian
+    from topomatch.stages.spectral.laplacian import laplacian
 
     lap = laplacian(mesh, mass, require_connected=False)
     n = lap.n

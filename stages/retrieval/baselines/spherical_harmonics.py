@@ -59,10 +59,10 @@ from functools import lru_cache
 import numpy as np
 from pydantic import Field, model_validator
 
-from pipeline.params import Params
-from stages.mesh.mesh import Mesh
-from stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, checked_areas, sample_surface
-from stages.retrieval.baselines.vectors import pairwise
+from topomatch.pipeline.params import Params
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, checked_areas, sample_surface
+from topomatch.stages.retrieval.baselines.vectors import pairwise
 
 
 class SphericalHarmonicsParams(Params):

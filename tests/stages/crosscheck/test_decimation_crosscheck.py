@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.registry import STAGES
-from stages.crosscheck.decimation import DecimationCrosscheckParams, decimate_crosscheck, meshlab_decimate
-from stages.mesh.decimate import DecimateParams, decimate, target_tolerance
+from topomatch.pipeline.registry import STAGES
+from topomatch.stages.crosscheck.decimation import DecimationCrosscheckParams, decimate_crosscheck, meshlab_decimate
+from topomatch.stages.mesh.decimate import DecimateParams, decimate, target_tolerance
 
 
 @pytest.mark.parametrize("name,ratio", [("torus.off", 0.5), ("eight_genus2.off", 0.5), ("torus.off", 0.2),
@@ -55,7 +55,7 @@ def test_stage_is_registered_as_a_side_branch():
 
 
 def test_pymeshlab_adapter_round_trip(bundled_mesh):
-    from stages.adapters.pymeshlab_adapter import from_meshset, to_meshset
+    from topomatch.stages.adapters.pymeshlab_adapter import from_meshset, to_meshset
 
     mesh = bundled_mesh("torus.off")
     ms = to_meshset(mesh)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stages.matching.batch import many_to_many, one_to_many, pad_features
-from stages.matching.dissimilarity import match_features
+from topomatch.stages.matching.batch import many_to_many, one_to_many, pad_features
+from topomatch.stages.matching.dissimilarity import match_features
 
 
 @pytest.mark.parametrize("dissimilarity", ["matched", "double_sum"])

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from stages.matching.correspondence import correspond, endpoint_costs
-from stages.matching.dissimilarity import match_features
+from topomatch.stages.matching.correspondence import correspond, endpoint_costs
+from topomatch.stages.matching.dissimilarity import match_features
 
 
 def test_greedy_variants_differ_where_expected():

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from stages.matching.features import endpoint_features, skeleton_root
-from stages.morse.mixture import mixture_distance
-from stages.reeb.level_sets import level_values
-from stages.reeb.prune import make_skeleton
-from stages.reeb.reeb_graph import ROOT, reeb_graph
+from topomatch.stages.matching.features import endpoint_features, skeleton_root
+from topomatch.stages.morse.mixture import mixture_distance
+from topomatch.stages.reeb.level_sets import level_values
+from topomatch.stages.reeb.prune import make_skeleton
+from topomatch.stages.reeb.reeb_graph import ROOT, reeb_graph
 
 
 def _star():
@@ -59,8 +59,8 @@ def test_root_without_root_node_is_nearest_to_area_centroid():
 @pytest.mark.parametrize("function", ["mixture", "fiedler"])
 @pytest.mark.parametrize("name", ["odedstein_hand_closed.obj.gz", "odedstein_cat-low-resolution.obj.gz"])
 def test_features_invariant_to_similarity(bundled_mesh, name, function):
-    from stages.mesh.mesh import Mesh
-    from stages.spectral.fiedler import fiedler_function
+    from topomatch.stages.mesh.mesh import Mesh
+    from topomatch.stages.spectral.fiedler import fiedler_function
 
     m = bundled_mesh(name)
     R = Rotation.from_rotvec([0.3, -1.1, 0.4]).as_matrix()

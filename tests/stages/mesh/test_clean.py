@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from pipeline.errors import ConfigError, InputError
-from stages.mesh.clean import CleanParams, clean, clean_mesh
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.errors import ConfigError, InputError
+from topomatch.stages.mesh.clean import CleanParams, clean, clean_mesh
+from topomatch.stages.mesh.mesh import Mesh
 
 
 def _with_isolated_vertex(mesh: Mesh, position=(5.0, 5.0, 5.0)) -> Mesh:
@@ -38,7 +38,7 @@ def test_soup_with_isolated_vertex_becomes_the_closed_octahedron(shapes):
 def test_stl_soup_of_bundled_torus_is_repaired(tmp_path, bundled_mesh):
     import igl
 
-    from stages.mesh.io import read_mesh
+    from topomatch.stages.mesh.io import read_mesh
 
     torus = bundled_mesh("torus.off")
     path = tmp_path / "torus.stl"
@@ -145,8 +145,8 @@ def test_params_validation():
 
 
 def test_clean_records_closedness_and_moves_keep_it(bundled_mesh):
-    from stages.mesh.clean import CleanParams, clean_mesh
-    from stages.reeb.reeb_graph import is_closed_manifold
+    from topomatch.stages.mesh.clean import CleanParams, clean_mesh
+    from topomatch.stages.reeb.reeb_graph import is_closed_manifold
 
     torus = clean_mesh(bundled_mesh("torus.off"), CleanParams()).mesh
     assert torus.closed_manifold is True and is_closed_manifold(torus.F)

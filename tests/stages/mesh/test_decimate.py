@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from pipeline.errors import ConfigError, StageError
-from stages.mesh.decimate import DecimateParams, decimate, decimate_mesh, target_tolerance
-from stages.mesh.measures import bbox_diagonal
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.errors import ConfigError, StageError
+from topomatch.stages.mesh.decimate import DecimateParams, decimate, decimate_mesh, target_tolerance
+from topomatch.stages.mesh.measures import bbox_diagonal
+from topomatch.stages.mesh.mesh import Mesh
 
 
 def _assert_reached(result, target):
@@ -42,7 +42,7 @@ def test_target_faces_on_a_closed_mesh_is_met_up_to_parity(bundled_mesh):
 
 
 def test_moderate_decimation_keeps_the_topology_of_the_torus(bundled_mesh):
-    from stages.mesh.topology import topology_report
+    from topomatch.stages.mesh.topology import topology_report
 
     result = decimate(bundled_mesh("torus.off"), params=DecimateParams(ratio=0.2))
     assert (result.euler_before, result.euler_after, result.nonmanifold_edges_after) == (0, 0, 0)

@@ -8,8 +8,8 @@ import shutil
 import numpy as np
 import pytest
 
-from pipeline.errors import InputError
-from stages.mesh.io import LoadParams, load, read_mesh
+from topomatch.pipeline.errors import InputError
+from topomatch.stages.mesh.io import LoadParams, load, read_mesh
 
 
 def _gzip(path):
@@ -61,7 +61,7 @@ def test_stl_reads_back_the_same_triangles(tmp_path, shapes, binary, gzipped):
 def test_open3d_written_ply_reads_back(tmp_path, bundled_mesh, ascii):
     import open3d as o3d
 
-    from stages.adapters.open3d_adapter import to_open3d
+    from topomatch.stages.adapters.open3d_adapter import to_open3d
 
     ref = bundled_mesh("eight_genus2.off")
     path = tmp_path / "eight.ply"

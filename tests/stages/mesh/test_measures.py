@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.registry import STAGES
-from stages.mesh.measures import MeasuresParams, measures, mesh_measures
-from stages.mesh.mesh import Mesh
+from topomatch.pipeline.registry import STAGES
+from topomatch.stages.mesh.measures import MeasuresParams, measures, mesh_measures
+from topomatch.stages.mesh.mesh import Mesh
 
 
 def test_unit_cube(shapes):
@@ -49,7 +49,7 @@ def test_stage_passes_the_mesh_through(shapes):
 
 
 def test_open3d_adapter_round_trip(bundled_mesh):
-    from stages.adapters.open3d_adapter import from_open3d, to_open3d
+    from topomatch.stages.adapters.open3d_adapter import from_open3d, to_open3d
 
     mesh = bundled_mesh("eight_genus2.off")
     back = from_open3d(to_open3d(mesh), name="x")

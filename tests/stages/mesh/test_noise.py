@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.errors import ConfigError
-from stages.mesh.measures import bbox_diagonal, mean_edge_length
-from stages.mesh.noise import NoiseParams, noise
+from topomatch.pipeline.errors import ConfigError
+from topomatch.stages.mesh.measures import bbox_diagonal, mean_edge_length
+from topomatch.stages.mesh.noise import NoiseParams, noise
 
 
 def test_same_seed_same_mesh_other_seed_other_mesh(bundled_mesh):

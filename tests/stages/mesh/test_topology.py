@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stages.mesh.mesh import Mesh
-from stages.mesh.topology import edge_incidence, topology_report
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.topology import edge_incidence, topology_report
 
 
 @pytest.mark.parametrize("name,genus", [("torus.off", 1), ("eight_genus2.off", 2),
@@ -126,7 +126,7 @@ def test_empty_mesh():
 def test_nonmanifold_vertices_agree_with_libigl(bundled_mesh):
     import igl
 
-    from stages.mesh.topology import nonmanifold_vertices
+    from topomatch.stages.mesh.topology import nonmanifold_vertices
 
     mesh = bundled_mesh("odedstein_hand_lowres.obj.gz")
     F = mesh.F

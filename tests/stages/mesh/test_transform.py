@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from pydantic import ValidationError
 
-from pipeline.errors import ConfigError
-from stages.mesh.mesh import Mesh
-from stages.mesh.transform import TransformParams, transform
+from topomatch.pipeline.errors import ConfigError
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.mesh.transform import TransformParams, transform
 
 
 def _point(p) -> Mesh:

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from shapes import disjoint_union, icosphere
 
-from pipeline.errors import StageError
-from stages.mesh.mesh import Mesh
-from stages.morse.agd import average_geodesic_distance
+from topomatch.pipeline.errors import StageError
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.morse.agd import average_geodesic_distance
 
 
 def test_maxima_at_the_tips_of_an_ellipsoid():
@@ -41,7 +41,7 @@ def test_several_components_are_rejected():
 
 
 def test_morse_stage_offers_agd():
-    from stages.morse.stage import MorseParams, morse_function
+    from topomatch.stages.morse.stage import MorseParams, morse_function
 
     s = icosphere(2)
     f = morse_function(Mesh(s.V * [2.0, 1.0, 1.0], s.F, name="e"), MorseParams(function="agd"))

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from stages.morse.centroid import enclosing_sphere_center, surface_centroid, vertex_mean
-from stages.morse.height import principal_height
-from stages.morse.mixture import mixture_distance
+from topomatch.stages.morse.centroid import enclosing_sphere_center, surface_centroid, vertex_mean
+from topomatch.stages.morse.height import principal_height
+from topomatch.stages.morse.mixture import mixture_distance
 
 
 def _similarity(V, rng, scale=2.5):
@@ -79,7 +79,7 @@ def test_surface_centroid_ignores_sampling_density(shapes):
 
 
 def test_flat_mesh_is_rejected():
-    from pipeline.errors import StageError
+    from topomatch.pipeline.errors import StageError
 
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
     F = np.array([[0, 1, 2], [1, 3, 2]])

@@ -8,10 +8,10 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from stages.morse.mixture import mixture_distance
-from stages.reeb.export import write_graphml, write_json, write_polyline
-from stages.reeb.level_sets import level_values
-from stages.reeb.reeb_graph import reeb_graph
+from topomatch.stages.morse.mixture import mixture_distance
+from topomatch.stages.reeb.export import write_graphml, write_json, write_polyline
+from topomatch.stages.reeb.level_sets import level_values
+from topomatch.stages.reeb.reeb_graph import reeb_graph
 
 
 @pytest.fixture

@@ -6,8 +6,8 @@ import igl
 import numpy as np
 import pytest
 
-from stages.morse.mixture import mixture_distance
-from stages.reeb.level_sets import band_index, isolines, level_values
+from topomatch.stages.morse.mixture import mixture_distance
+from topomatch.stages.reeb.level_sets import band_index, isolines, level_values
 
 
 def test_levels_and_bands():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import networkx as nx
 import numpy as np
 
-from stages.reeb.prune import cycle_rank, endpoints, prune_graph
+from topomatch.stages.reeb.prune import cycle_rank, endpoints, prune_graph
 
 
 def _graph(edges, areas):

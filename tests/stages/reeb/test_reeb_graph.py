@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from stages.morse.height import principal_height
-from stages.morse.mixture import mixture_distance
-from stages.spectral.fiedler import fiedler_function
-from stages.reeb.level_sets import band_index, level_values
-from stages.reeb.prune import make_skeleton
-from stages.reeb.reeb_graph import ROOT, reeb_graph
+from topomatch.stages.morse.height import principal_height
+from topomatch.stages.morse.mixture import mixture_distance
+from topomatch.stages.spectral.fiedler import fiedler_function
+from topomatch.stages.reeb.level_sets import band_index, level_values
+from topomatch.stages.reeb.prune import make_skeleton
+from topomatch.stages.reeb.reeb_graph import ROOT, reeb_graph
 
 FUNCTIONS = {
     "mixture": lambda m: mixture_distance(m.V, m.F),
@@ -170,7 +170,7 @@ def test_row_components_number_like_scipy(monkeypatch, rounds):
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    import stages.reeb.reeb_graph as rg
+    import topomatch.stages.reeb.reeb_graph as rg
 
     monkeypatch.setattr(rg, "HOOK_ROUNDS", rounds)
     rng = np.random.default_rng(3)

@@ -21,7 +21,7 @@ def itk_dir() -> Path:
 @pytest.fixture(scope="session")
 def pd_slice():
     """BrainProtonDensitySlice.png (217 x 181), the bundled ITK proton-density slice."""
-    from stages.registration.io import read_image
+    from topomatch.stages.registration.io import read_image
 
     return read_image(ITK_DIR / "BrainProtonDensitySlice.png")
 
@@ -29,7 +29,7 @@ def pd_slice():
 @pytest.fixture(scope="session")
 def t1_slice():
     """BrainT1Slice.png, in register with the PD slice."""
-    from stages.registration.io import read_image
+    from topomatch.stages.registration.io import read_image
 
     return read_image(ITK_DIR / "BrainT1Slice.png")
 
@@ -37,7 +37,7 @@ def t1_slice():
 @pytest.fixture
 def blob_image():
     """A smooth, asymmetric 64 x 80 test image (two Gaussian blobs and a ramp), built in code."""
-    from stages.registration.image import Image
+    from topomatch.stages.registration.image import Image
 
     rows, cols = np.mgrid[0:64, 0:80].astype(float)
     data = (100 * np.exp(-((cols - 30) ** 2 + (rows - 25) ** 2) / 120.0)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from PIL import Image as PILImage
 
-from pipeline.cli import main
-from pipeline.config import load_experiment
-from pipeline.runner import run_experiment
+from topomatch.pipeline.cli import main
+from topomatch.pipeline.config import load_experiment
+from topomatch.pipeline.runner import run_experiment
 from tests_paths import REPO_ROOT
 
 CONFIGS = REPO_ROOT / "configs" / "registration"
@@ -48,8 +48,8 @@ def test_cli_text_and_outputs(capsys, itk_dir, tmp_path):
 
 
 def test_cli_flags_a_misalignment_outside_the_capture_range(capsys, pd_slice, tmp_path):
-    from stages.registration.misalign import moved
-    from stages.registration.transform import RigidTransform
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.transform import RigidTransform
 
     moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 0, 0, 150))
     path = tmp_path / "upside_down.png"

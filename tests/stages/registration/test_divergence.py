@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from stages.registration.divergence import (conditionals, jensen_renyi, jensen_renyi_histogram, jensen_tsallis,
+from topomatch.stages.registration.divergence import (conditionals, jensen_renyi, jensen_renyi_histogram, jensen_tsallis,
                                             jensen_tsallis_alpha2_identity, jensen_tsallis_histogram,
                                             mutual_information, renyi_entropy, shannon_entropy, similarity,
                                             tsallis_entropy, tsallis_mutual_information)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from stages.registration.histogram import Binning, JointHistogram, joint_histogram_reference
-from stages.registration.interpolation import bilinear, downsample, partial_volume, resample
-from stages.registration.transform import RigidTransform, grid_points
+from topomatch.stages.registration.histogram import Binning, JointHistogram, joint_histogram_reference
+from topomatch.stages.registration.interpolation import bilinear, downsample, partial_volume, resample
+from topomatch.stages.registration.transform import RigidTransform, grid_points
 
 
 def test_bilinear_is_exact_on_affine_images():
@@ -37,7 +37,7 @@ def test_partial_volume_weights():
 
 def test_resample_agrees_with_simpleitk(pd_slice):
     """Same transform, same convention: our bilinear resampling equals SimpleITK's Resample inside the image."""
-    from stages.registration.simpleitk_reference import sitk_resample
+    from topomatch.stages.registration.simpleitk_reference import sitk_resample
 
     T = RigidTransform.for_image(pd_slice.shape, 7.3, -4.1, 12.5)
     ours = resample(pd_slice, T, pd_slice.shape)

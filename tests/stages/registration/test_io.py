@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.errors import InputError
-from stages.registration.io import LoadImageParams, LoadPairParams, load_image, load_pair, read_image
+from topomatch.pipeline.errors import InputError
+from topomatch.stages.registration.io import LoadImageParams, LoadPairParams, load_image, load_pair, read_image
 
 
 def _ramp(h=24, w=32):

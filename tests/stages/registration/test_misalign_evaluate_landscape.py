@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.errors import StageError
-from stages.registration.evaluate import EvaluateParams, evaluate_registration, truth_transform
-from stages.registration.landscape import LandscapeParams, scan
-from stages.registration.misalign import MisalignParams, misalign, misalign_pair, random_cases
-from stages.registration.register import Registration
-from stages.registration.transform import RigidTransform, grid_points
+from topomatch.pipeline.errors import StageError
+from topomatch.stages.registration.evaluate import EvaluateParams, evaluate_registration, truth_transform
+from topomatch.stages.registration.landscape import LandscapeParams, scan
+from topomatch.stages.registration.misalign import MisalignParams, misalign, misalign_pair, random_cases
+from topomatch.stages.registration.register import Registration
+from topomatch.stages.registration.transform import RigidTransform, grid_points
 
 
 def _registration(transform, ok=True):
@@ -28,7 +28,7 @@ def test_random_cases_are_seeded_bounded_and_independent_of_n():
 
 def test_misalign_makes_moving_of_T_equal_fixed(blob_image):
     """M(T(x)) = fixed(x): sampling the moving image at T(x) gives back the fixed image (cubic resampling)."""
-    from stages.registration.interpolation import resample
+    from topomatch.stages.registration.interpolation import resample
 
     res = misalign(blob_image, params=MisalignParams(theta=(3.0, -2.0, 11.0)))
     assert res.fixed is blob_image and res.truth == {"tx": 3.0, "ty": -2.0, "angle": 11.0}
@@ -63,7 +63,7 @@ def test_evaluate_exact_and_translated(pd_slice):
 
 
 def test_angle_error_wraps():
-    from stages.registration.image import Image
+    from topomatch.stages.registration.image import Image
 
     im = Image(np.random.default_rng(0).random((10, 10)))
     ev = evaluate_registration(im, _registration(RigidTransform.for_image(im.shape, 0, 0, 179.0)), {"angle": -179.0})

@@ -7,12 +7,12 @@ import csv
 import numpy as np
 import pytest
 
-from pipeline.errors import ConfigError, StageError
-from stages.registration.evaluate import EvaluateParams, evaluate_registration
-from stages.registration.io import read_image
-from stages.registration.misalign import moved
-from stages.registration.register import LevelSpec, RegisterParams, register
-from stages.registration.transform import RigidTransform
+from topomatch.pipeline.errors import ConfigError, StageError
+from topomatch.stages.registration.evaluate import EvaluateParams, evaluate_registration
+from topomatch.stages.registration.io import read_image
+from topomatch.stages.registration.misalign import moved
+from topomatch.stages.registration.register import LevelSpec, RegisterParams, register
+from topomatch.stages.registration.transform import RigidTransform
 
 
 def _truth(theta):

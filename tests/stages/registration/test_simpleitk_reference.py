@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from stages.registration.evaluate import evaluate_registration
-from stages.registration.simpleitk_reference import (SimpleITKParams, from_sitk_euler, sitk_euler, sitk_register,
+from topomatch.stages.registration.evaluate import evaluate_registration
+from topomatch.stages.registration.simpleitk_reference import (SimpleITKParams, from_sitk_euler, sitk_euler, sitk_register,
                                                      to_sitk)
-from stages.registration.transform import RigidTransform, grid_points
+from topomatch.stages.registration.transform import RigidTransform, grid_points
 
 
 def test_euler_round_trip_and_same_point_map():
@@ -31,7 +31,7 @@ def test_to_sitk_index_convention(pd_slice):
 
 
 def test_reference_registration_on_the_itk_translation(itk_dir):
-    from stages.registration.io import read_image
+    from topomatch.stages.registration.io import read_image
 
     fixed = read_image(itk_dir / "BrainProtonDensitySliceBorder20.png")
     moving = read_image(itk_dir / "BrainProtonDensitySliceShifted13x17y.png")
@@ -45,7 +45,7 @@ def test_reference_registration_on_the_itk_translation(itk_dir):
 
 def test_simpleitk_failure_becomes_a_flag(blob_image):
     """A moving image that is a small corner square: Mattes MI finds no samples; the error becomes a flag."""
-    from stages.registration.image import Image
+    from topomatch.stages.registration.image import Image
 
     corner = Image(np.pad(np.ones((4, 4)), ((0, 60), (0, 76))))
     reg = sitk_register(blob_image, corner, SimpleITKParams())

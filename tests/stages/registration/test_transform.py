@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from stages.registration.transform import (RigidTransform, from_thesis, grid_points, rotation_matrix,
+from topomatch.stages.registration.transform import (RigidTransform, from_thesis, grid_points, rotation_matrix,
                                            target_registration_error)
 
 

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from stages.mesh.io import read_mesh
-from stages.mesh.mesh import Mesh
-from stages.morse.agd import average_geodesic_distance
-from stages.reeb.level_sets import level_values
-from stages.reeb.prune import make_skeleton
-from stages.reeb.reeb_graph import reeb_graph
-from stages.retrieval.descriptor import EndpointHKSParams, endpoint_hks_descriptor
-from stages.spectral.spectrum import mesh_spectrum
+from topomatch.stages.mesh.io import read_mesh
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.morse.agd import average_geodesic_distance
+from topomatch.stages.reeb.level_sets import level_values
+from topomatch.stages.reeb.prune import make_skeleton
+from topomatch.stages.reeb.reeb_graph import reeb_graph
+from topomatch.stages.retrieval.descriptor import EndpointHKSParams, endpoint_hks_descriptor
+from topomatch.stages.spectral.spectrum import mesh_spectrum
 from tests_paths import BUNDLED_MESHES
 
 
@@ -23,7 +23,7 @@ def describe(mesh: Mesh) -> np.ndarray:
 
 
 def test_invariant_to_rotation_translation_scale():
-    from stages.mesh.decimate import decimate_mesh
+    from topomatch.stages.mesh.decimate import decimate_mesh
 
     mesh = decimate_mesh(read_mesh(BUNDLED_MESHES / "odedstein_human_woman.obj.gz")[0], 4000).mesh
     R = np.linalg.qr(np.random.default_rng(5).standard_normal((3, 3)))[0]

@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pipeline.errors import ConfigError, InputError, StageError
-from stages.mesh.mesh import Mesh
-from stages.retrieval.baselines import BASELINES, d2, shapedna, spherical_harmonics as sh
-from stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, sample_surface, triangle_areas
+from topomatch.pipeline.errors import ConfigError, InputError, StageError
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.retrieval.baselines import BASELINES, d2, shapedna, spherical_harmonics as sh
+from topomatch.stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, sample_surface, triangle_areas
 
 
 def moved(mesh: Mesh, scale: float = 2.5, seed: int = 1) -> Mesh:
@@ -31,7 +31,7 @@ def moved(mesh: Mesh, scale: float = 2.5, seed: int = 1) -> Mesh:
 
 @pytest.fixture(scope="module")
 def human():
-    from stages.mesh.io import read_mesh
+    from topomatch.stages.mesh.io import read_mesh
     from tests_paths import BUNDLED_MESHES
 
     return read_mesh(BUNDLED_MESHES / "odedstein_human_man.obj.gz")[0]
@@ -39,7 +39,7 @@ def human():
 
 @pytest.fixture(scope="module")
 def torus():
-    from stages.mesh.io import read_mesh
+    from topomatch.stages.mesh.io import read_mesh
     from tests_paths import BUNDLED_MESHES
 
     return read_mesh(BUNDLED_MESHES / "torus.off")[0]

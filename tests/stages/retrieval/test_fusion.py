@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
-from stages.retrieval.fusion import Fusion, fuse, fused_matrix, fused_query, manifold_ranking, median_scale
+from topomatch.stages.retrieval.fusion import Fusion, fuse, fused_matrix, fused_query, manifold_ranking, median_scale
 
 
 def two_moons(n=60, seed=0):
@@ -58,7 +58,7 @@ def test_fused_query_of_a_duplicate_ranks_it_first():
 
 
 def test_one_row_ranks_as_the_full_ranking():
-    from stages.retrieval.fusion import manifold_ranking_row
+    from topomatch.stages.retrieval.fusion import manifold_ranking_row
 
     X, _ = two_moons(40, seed=2)
     D = cdist(X, X)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import stages.retrieval.metrics as metrics_module
-from stages.retrieval.metrics import (METRIC_NAMES, chance_levels, precision_recall, ranked_lists,
+import topomatch.stages.retrieval.metrics as metrics_module
+from topomatch.stages.retrieval.metrics import (METRIC_NAMES, chance_levels, precision_recall, ranked_lists,
                                       retrieval_metrics)
 
 # log2-discounts of ranks 3, 4, 5, 6 (rank 1 and 2 weigh 1)

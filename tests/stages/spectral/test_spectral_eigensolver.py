@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import scipy.sparse.linalg as sla
 
-from pipeline.errors import StageError
-from stages.mesh.mesh import Mesh
-from stages.spectral.eigensolver import (ShiftInvert, fix_signs, relative_gap, skewness, smallest_eigenpairs)
-from stages.spectral.laplacian import laplacian
+from topomatch.pipeline.errors import StageError
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.spectral.eigensolver import (ShiftInvert, fix_signs, relative_gap, skewness, smallest_eigenpairs)
+from topomatch.stages.spectral.laplacian import laplacian
 
 SPOT = "odedstein_spot_low_resolution.obj.gz"
 HAND = "odedstein_hand_lowres.obj.gz"
@@ -214,7 +214,7 @@ def test_relative_gap():
 
 
 def test_lobpcg_without_geometry_and_thick_restarts(bundled_mesh):
-    from stages.spectral import eigensolver as es
+    from topomatch.stages.spectral import eigensolver as es
 
     mesh = bundled_mesh(HAND)
     lap = laplacian(mesh)

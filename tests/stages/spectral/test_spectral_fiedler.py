@@ -5,14 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.errors import ConfigError, InputError
-from stages.mesh.mesh import Mesh
-from stages.morse.function import MorseFunction
-from stages.spectral.fiedler import FiedlerParams, fiedler, fiedler_function
+from topomatch.pipeline.errors import ConfigError, InputError
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.morse.function import MorseFunction
+from topomatch.stages.spectral.fiedler import FiedlerParams, fiedler, fiedler_function
 
 
 def test_stage_is_registered_with_its_data_flow():
-    from pipeline.registry import STAGES
+    from topomatch.pipeline.registry import STAGES
 
     spec = STAGES["fiedler"]
     assert spec.consumes == ("mesh",) and spec.produces == ("function",)
@@ -67,7 +67,7 @@ def test_bad_mesh_errors_name_the_mesh(shapes):
 
 
 def test_morse_stage_dispatches_to_fiedler(bundled_mesh):
-    from stages.morse.stage import MorseParams, morse
+    from topomatch.stages.morse.stage import MorseParams, morse
 
     mesh = bundled_mesh("odedstein_spot_low_resolution.obj.gz")
     f = morse(mesh, params=MorseParams(function="fiedler")).function

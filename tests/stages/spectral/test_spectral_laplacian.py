@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.errors import ConfigError, InputError
-from stages.mesh.mesh import Mesh
-from stages.spectral.laplacian import (LaplacianParams, check_mesh, cotangent_and_full_mass, laplacian,
+from topomatch.pipeline.errors import ConfigError, InputError
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.spectral.laplacian import (LaplacianParams, check_mesh, cotangent_and_full_mass, laplacian,
                                        laplacian_stage)
 
 
@@ -121,7 +121,7 @@ def test_several_components_are_rejected_with_a_fix(shapes):
 
 
 def test_stage_and_params(bundled_mesh):
-    from pipeline.registry import STAGES
+    from topomatch.pipeline.registry import STAGES
 
     spec = STAGES["laplacian"]
     assert spec.consumes == ("mesh",) and spec.produces == ("laplacian",)

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from shapes import icosphere
 
-from stages.mesh.io import read_mesh
-from stages.mesh.mesh import Mesh
-from stages.spectral.heat_kernel import HKSParams, heat_kernel_signature, hks_histograms
-from stages.spectral.spectrum import mesh_spectrum
+from topomatch.stages.mesh.io import read_mesh
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.spectral.heat_kernel import HKSParams, heat_kernel_signature, hks_histograms
+from topomatch.stages.spectral.spectrum import mesh_spectrum
 from tests_paths import BUNDLED_MESHES
 
 
@@ -54,7 +54,7 @@ def test_hks_invariant_to_rigid_motion_and_scale():
 
 
 def test_spectrum_rejects_too_few_vertices():
-    from pipeline.errors import StageError
+    from topomatch.pipeline.errors import StageError
 
     with pytest.raises(StageError, match="lower spectrum.k"):
         mesh_spectrum(icosphere(0), 20)
