@@ -1,25 +1,34 @@
-"""Content-addressed, on-disk cache of stage results.
+"""Content-addressed, on-disk cache of stage results (typed data, never pickle).
 
-The key of a stage result is the SHA-256 of (stage name, stage version, the
-canonical params, the keys of the state entries it consumed); the key of an
-input file is the SHA-256 of its name and bytes. So a key changes exactly when
-an input's content, a parameter or a stage version changes, and a re-run or a
-resumed run recomputes only what changed. Values are pickled and written
-atomically (temporary file + ``os.replace``); an unreadable entry (truncated,
-from an incompatible version) counts as a miss.
+The key of a stage result is the SHA-256 of (stage name, stage version, the canonical params,
+the keys of the state entries it consumed); the key of an input file is the SHA-256 of its
+name and bytes. So a key changes exactly when an input's content, a parameter or a stage
+version changes, and a re-run or a resumed run recomputes only what changed.
+
+Values are written by :mod:`topomatch.pipeline.codec` (arrays in ``.npz``, the structure as
+JSON, loaded with ``allow_pickle=False``) under ``root/<key[:2]>/<key>.npz``, atomically. A
+missing entry is a miss; a damaged, foreign or stale entry (another schema, an unknown type, a
+result of the wrong type for its stage) is a miss with a warning, and is overwritten by the
+recomputed result. Nothing read from a cache folder can run code.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import os
-import pickle
-import tempfile
+import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
-_MISSING = object()
+from topomatch.pipeline import codec
+from topomatch.pipeline.files import atomic_write_bytes
+
+#: File suffix of cache entries.
+SUFFIX = ".npz"
+
+
+class CacheWarning(UserWarning):
+    """A cache entry was unusable (damaged, foreign, stale) or a result could not be stored."""
 
 
 def hash_file(path: str | Path, chunk: int = 1 << 20) -> str:
@@ -37,53 +46,58 @@ def stage_key(name: str, version: int, params: dict[str, Any], input_keys: list[
     return hashlib.sha256(payload.encode()).hexdigest()
 
 
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` so that readers see the old file or the whole new one."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def atomic_write_text(path: str | Path, text: str) -> None:
-    atomic_write_bytes(path, text.encode("utf-8"))
-
-
 class Cache:
-    """Pickled values under ``root/<key[:2]>/<key>.pkl``; ``root=None`` disables caching."""
+    """Stage results under ``root/<key[:2]>/<key>.npz``; ``root=None`` disables caching."""
 
     def __init__(self, root: str | Path | None):
         self.root = None if root is None else Path(root)
 
     def _path(self, key: str) -> Path:
-        assert self.root is not None
-        return self.root / key[:2] / f"{key}.pkl"
+        if self.root is None:
+            raise ValueError("the cache is disabled")
+        return self.root / key[:2] / f"{key}{SUFFIX}"
 
-    def get(self, key: str) -> tuple[bool, Any]:
-        """(hit, value); a missing or unreadable entry is a miss."""
+    def get(self, key: str, check: Callable[[Any], str | None] | None = None) -> tuple[bool, Any]:
+        """(hit, value). ``check(value)`` returns why a decoded value is unusable (or None).
+
+        A missing entry is a miss; an unusable one is a miss with a :class:`CacheWarning`.
+        """
         if self.root is None:
             return False, None
         path = self._path(key)
         try:
-            with open(path, "rb") as fh:
-                return True, pickle.load(fh)
+            data = path.read_bytes()
         except FileNotFoundError:
             return False, None
-        except Exception:  # truncated or incompatible pickle: recompute
+        except OSError as exc:
+            warnings.warn(f"cache entry {path} cannot be read ({exc}); recomputing", CacheWarning, stacklevel=2)
             return False, None
+        try:
+            value = codec.loads(data)
+        except codec.CodecError as exc:
+            warnings.warn(f"cache entry {path} is unusable ({exc}); recomputing", CacheWarning, stacklevel=2)
+            return False, None
+        problem = check(value) if check is not None else None
+        if problem:
+            warnings.warn(f"cache entry {path} is unusable ({problem}); recomputing", CacheWarning, stacklevel=2)
+            return False, None
+        return True, value
 
-    def put(self, key: str, value: Any) -> None:
+    def put(self, key: str, value: Any) -> bool:
+        """Store ``value``; False (with a :class:`CacheWarning`) when it cannot be encoded or written."""
         if self.root is None:
-            return
-        atomic_write_bytes(self._path(key), pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL))
+            return False
+        try:
+            data = codec.dumps(value)
+        except codec.CodecError as exc:
+            warnings.warn(f"result not cached: {exc}", CacheWarning, stacklevel=2)
+            return False
+        try:
+            atomic_write_bytes(self._path(key), data)
+        except OSError as exc:
+            warnings.warn(f"result not cached: cannot write {self._path(key)} ({exc})", CacheWarning, stacklevel=2)
+            return False
+        return True
 
     def __contains__(self, key: str) -> bool:
         return self.root is not None and self._path(key).exists()

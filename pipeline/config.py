@@ -35,8 +35,9 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from topomatch.pipeline.errors import ConfigError, InputError
 from topomatch.pipeline.params import Params, validate_json_strict
+from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.paths import display_path, resolve_input
-from topomatch.pipeline.registry import StageSpec, get_stage
+from topomatch.pipeline.registry import get_report, get_stage
 
 #: State entries that each kind of input provides before the first stage.
 INPUT_STATE = {
@@ -208,6 +209,14 @@ class Experiment:
             "executor": self.raw.executor.model_dump(mode="json"),
         }
 
+    def resolve_path(self, template: str, where: str) -> Path:
+        """The one file a path template names ({bundled}, {data_root}, relative to the config's folder).
+
+        Raises ConfigError / InputError naming ``where`` and the file.
+        """
+        base = self.source.parent if self.source else Path.cwd()
+        return resolve_input(template, base_dir=base, root=self.data_root, where=where)[0]
+
     def content_hash(self) -> str:
         """Hash of what determines the results (not the executor), 12 hex digits."""
         payload = {k: v for k, v in self.resolved().items() if k != "executor"}
@@ -307,8 +316,8 @@ def build_experiment(
     prefix = f"{source}: " if source else ""
     try:
         raw = validate_json_strict(RawConfig, data, "")
-        calls = _resolve_calls(raw)
-        _check_data_flow(raw, calls)
+        calls = resolve_chain(raw.stages)
+        check_chain(calls, {key for kind, keys in INPUT_STATE.items() if getattr(raw.inputs, kind) for key in keys})
         _check_sweeps(raw, calls)
         reports = _resolve_reports(raw)
     except ConfigError as exc:
@@ -386,9 +395,10 @@ def load_experiment(
     return build_experiment(data, source=path, data_root=data_root, resolve_inputs=resolve_inputs)
 
 
-def _resolve_calls(raw: RawConfig) -> tuple[StageCall, ...]:
+def resolve_chain(entries: list[Any] | tuple[Any, ...]) -> tuple[StageCall, ...]:
+    """Stage calls (validated params, unique labels) of a chain in config form (names or {name: params})."""
     calls, seen = [], {}
-    for i, entry in enumerate(raw.stages):
+    for i, entry in enumerate(entries):
         name, params = _split_entry(entry, f"stages[{i}]")
         try:
             spec = get_stage(name)
@@ -400,11 +410,9 @@ def _resolve_calls(raw: RawConfig) -> tuple[StageCall, ...]:
     return tuple(calls)
 
 
-def _check_data_flow(raw: RawConfig, calls: tuple[StageCall, ...]) -> None:
-    available = set()
-    for kind, keys in INPUT_STATE.items():
-        if getattr(raw.inputs, kind):
-            available.update(keys)
+def check_chain(calls: tuple[StageCall, ...], available: set[str]) -> None:
+    """Check that every stage's consumed entries are ``available`` initially or produced earlier."""
+    available = set(available)
     for call in calls:
         missing = [k for k in call.spec.consumes if k not in available]
         if missing:
@@ -413,6 +421,30 @@ def _check_data_flow(raw: RawConfig, calls: tuple[StageCall, ...]) -> None:
                 f"nor an earlier stage provide (available: {', '.join(sorted(available)) or 'nothing'})"
             )
         available.update(call.spec.produces)
+
+
+def chain_with(chain: list[Any] | tuple[Any, ...], overrides: dict[str, dict[str, Any]]) -> list[Any]:
+    """``chain`` (config form) with ``overrides`` {stage name: {param: value}} merged into the one stage
+    of each name (nested mappings are merged key by key)."""
+    out = list(chain)
+    for name, values in overrides.items():
+        positions = [i for i, e in enumerate(out) if _entry_name(e) == name]
+        if len(positions) != 1:
+            raise ConfigError(f"the chain has {len(positions)} stages called {name!r}, expected exactly one")
+        i = positions[0]
+        entry = out[i]
+        params = copy.deepcopy(dict(entry[name] or {})) if isinstance(entry, dict) else {}
+        out[i] = {name: _merge(params, values)}
+    return out
+
+
+def _merge(base: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
+    for key, value in values.items():
+        if isinstance(value, dict) and isinstance(base.get(key), dict):
+            base[key] = _merge(dict(base[key]), value)
+        else:
+            base[key] = value
+    return base
 
 
 def _sweep_target(key: str, calls: tuple[StageCall, ...]) -> tuple[int, str]:
@@ -453,8 +485,6 @@ def _check_sweeps(raw: RawConfig, calls: tuple[StageCall, ...]) -> None:
 
 
 def _resolve_reports(raw: RawConfig) -> tuple[ReportCall, ...]:
-    from topomatch.pipeline.reports import get_report
-
     out = []
     for i, entry in enumerate(raw.reports):
         name, params = _split_entry(entry, f"reports[{i}]")

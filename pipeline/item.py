@@ -1,17 +1,30 @@
-"""Running the stage chain of one item, with caching (executed inside workers)."""
+"""Running a stage chain: one item of a run (inside a worker), or any in-memory state (the API).
+
+:func:`run_chain` is the one place where stages are called: it computes each call's cache key
+from the stage name, version, canonical params and the keys of the consumed state entries,
+reads the result from the cache or computes and stores it, and hands the produced entries on.
+A state entry without a key (an in-memory value given by the Python API) makes everything
+downstream of it uncached.
+"""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import time
 import traceback
+import typing
 from dataclasses import dataclass, field
 from typing import Any
 
 from topomatch.pipeline.cache import Cache, hash_file, stage_key
-from topomatch.pipeline.config import Item
-from topomatch.pipeline.errors import TopomatchError
+from pathlib import Path
+
+from topomatch.pipeline.config import Item, StageCall, check_chain, resolve_chain
+from topomatch.pipeline.contract import StageSpec
+from topomatch.pipeline.errors import InputError, TopomatchError
+from topomatch.pipeline.files import check_readable_file
 from topomatch.pipeline.registry import discover
 
 
@@ -58,16 +71,10 @@ class ItemResult:
 
 
 def run_item(item: Item, cache_root: str | None) -> ItemResult:
-    """Run ``item``'s stage chain; every stage result is read from or written to the cache.
-
-    A :class:`TopomatchError` or any other exception inside a stage stops this
-    item's chain and is recorded (the results of earlier stages are kept);
-    ``KeyboardInterrupt`` propagates.
-    """
+    """Run ``item``'s stage chain from its input files; see :func:`run_chain`."""
     discover()
-    cache = Cache(cache_root)
     out = ItemResult(item.item_id, item.input_path, dict(item.sweep), item.input_label)
-    state: dict[str, tuple[Any, str]] = {}
+    state: dict[str, tuple[Any, str | None]] = {}
     for key, path in (item.paths or {"path": item.input_path}).items():
         try:
             state[key] = (path, hash_file(path))
@@ -76,32 +83,95 @@ def run_item(item: Item, cache_root: str | None) -> ItemResult:
             return out
     for key, value in item.values.items():
         state[key] = (value, hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode()).hexdigest())
-    for call in item.calls:
+    run_chain(item.calls, state, Cache(cache_root), out)
+    return out
+
+
+def run_stages(chain: list[Any] | tuple[Any, ...], *, paths: dict[str, str | Path] | None = None,
+               values: dict[str, Any] | None = None, cache_root: str | None = None, label: str = "") -> ItemResult:
+    """Run a chain in config form on input files (``paths``: cached by content) and in-memory
+    ``values`` (uncached, with everything downstream of them): the Python API's runner.
+
+    Raises
+    ------
+    ConfigError
+        A bad chain (unknown stage, bad params, an entry no input or earlier stage provides).
+    InputError
+        An input file that cannot be read.
+    """
+    discover()
+    paths, values = dict(paths or {}), dict(values or {})
+    calls = resolve_chain(chain)
+    check_chain(calls, set(paths) | set(values))
+    label = label or str(next(iter(paths.values()), ""))
+    out = ItemResult(label, label, {}, label)
+    state: dict[str, tuple[Any, str | None]] = {k: (v, None) for k, v in values.items()}
+    for key, path in paths.items():
+        check_readable_file(path)
+        try:
+            state[key] = (str(path), hash_file(path))
+        except OSError as exc:
+            raise InputError(path, f"cannot read input ({exc.strerror or exc})") from None
+    run_chain(calls, state, Cache(cache_root), out)
+    return out
+
+
+def run_chain(calls: tuple[StageCall, ...] | list[StageCall], state: dict[str, tuple[Any, str | None]],
+              cache: Cache, out: ItemResult) -> None:
+    """Run ``calls`` on ``state`` ({entry: (value, cache key or None)}), recording into ``out``.
+
+    A :class:`TopomatchError` or any other exception inside a stage stops the chain and is
+    recorded in ``out`` (the results of earlier stages are kept); ``KeyboardInterrupt``
+    propagates.
+    """
+    for call in calls:
         spec = call.spec
-        key = stage_key(spec.name, spec.version, call.params.canonical(), [state[k][1] for k in spec.consumes])
-        out.keys[call.label] = key
+        consumed = [state[k][1] for k in spec.consumes]
+        key = None if None in consumed else stage_key(spec.name, spec.version, call.params.canonical(), consumed)
+        out.keys[call.label] = key or ""
         out.stage_produces[call.label] = spec.produces
         t0 = time.perf_counter()
-        hit, result = cache.get(key)
+        hit, result = cache.get(key, functools.partial(_unusable, spec)) if key else (False, None)
         if not hit:
             try:
                 result = spec.run({k: state[k][0] for k in spec.consumes}, call.params)
             except TopomatchError as exc:
-                out.error, out.error_stage = _name_input(str(exc), item), call.label
-                return out
+                out.error, out.error_stage = _name_input(str(exc), out.input_path), call.label
+                return
             except Exception as exc:  # a bug or a library failure: keep going with other items
-                out.error = f"{item.input_path}: stage {call.label} failed: {type(exc).__name__}: {exc}"
+                out.error = f"{out.input_path}: stage {call.label} failed: {type(exc).__name__}: {exc}"
                 out.error_stage, out.traceback = call.label, traceback.format_exc()
-                return out
-            cache.put(key, result)
+                return
+            if key:
+                cache.put(key, result)
         out.seconds[call.label] = time.perf_counter() - t0
         out.cache_hits[call.label] = hit
         out.results[call.label] = result
         for k in spec.produces:
-            state[k] = (getattr(result, k), f"{key}:{k}")
-    return out
+            state[k] = (getattr(result, k), f"{key}:{k}" if key else None)
 
 
-def _name_input(message: str, item: Item) -> str:
+@functools.lru_cache(maxsize=None)
+def result_type(spec: StageSpec) -> type | None:
+    """The class a stage's function is annotated to return (None when not a plain class)."""
+    try:
+        hint = typing.get_type_hints(spec.func).get("return")
+    except Exception:  # an annotation that does not resolve: skip the type check
+        return None
+    return hint if isinstance(hint, type) else None
+
+
+def _unusable(spec: StageSpec, value: Any) -> str | None:
+    """Why a cached value cannot be the result of ``spec`` (None when it can)."""
+    expected = result_type(spec)
+    if expected is not None and not isinstance(value, expected):
+        return f"a {type(value).__name__}, not the {expected.__name__} that stage {spec.name} returns"
+    missing = [k for k in spec.produces if not hasattr(value, k)]
+    if missing:
+        return f"no {', '.join(missing)} for stage {spec.name}"
+    return None
+
+
+def _name_input(message: str, input_path: str) -> str:
     """Make sure an error message names the input file."""
-    return message if item.input_path in message else f"{item.input_path}: {message}"
+    return message if not input_path or input_path in message else f"{input_path}: {message}"

@@ -73,23 +73,3 @@ def display_path(path: str | Path, root: Path | None = None) -> str:
         if base is not None and path.is_relative_to(base):
             return f"{prefix}/{path.relative_to(base).as_posix()}"
     return str(path)
-
-
-def check_readable_file(path: str | Path) -> Path:
-    """``path`` as a Path, after checking that it is an existing, readable regular file.
-
-    Raises
-    ------
-    InputError
-        Not found, not a regular file, or not readable; the message names the file.
-    """
-    import os
-
-    path = Path(path)
-    if not path.exists():
-        raise InputError(path, "file not found")
-    if not path.is_file():
-        raise InputError(path, "not a regular file")
-    if not os.access(path, os.R_OK):
-        raise InputError(path, "file is not readable (permission denied)")
-    return path

@@ -1,105 +1,78 @@
-"""Stage registry: the YAML name of a stage -> (function, params type, version, data flow).
+"""The registry: the YAML name of a stage or report -> its spec, found by scanning the code.
 
-A stage is a plain function ``func(*consumed, params) -> result``. It reads the
-state entries named in ``consumes`` (e.g. ``"mesh"``) and its result object
-provides the attributes named in ``produces``, which become the new state
-entries for the next stage. ``version`` is part of the cache key: bump it when
-the output of the algorithm changes.
-
-Stages register themselves with the :func:`stage` decorator when their module is
-imported; :func:`discover` imports every stage module listed in
-``STAGE_MODULES``.
+Stages and reports mark themselves with the :func:`~topomatch.pipeline.contract.stage` and
+:func:`~topomatch.pipeline.contract.report` decorators, which only attach a spec to the
+function. :func:`discover` imports every module of the scanned packages
+(:data:`SCANNED_PACKAGES`: the engine's built-in reports and all of ``topomatch.stages``) and
+collects the marked functions; no module is listed by name, so a new stage is one new module.
+Two functions that claim the same name are an error.
 """
 
 from __future__ import annotations
 
 import importlib
+import pkgutil
 import typing
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
+from topomatch.pipeline.contract import ReportSpec, StageSpec
 from topomatch.pipeline.errors import ConfigError
 from topomatch.pipeline.params import Params
 
-#: Modules that define stages and reports (imported by :func:`discover`).
-STAGE_MODULES: tuple[str, ...] = (
-    "topomatch.stages.mesh.io",
-    "topomatch.stages.mesh.clean",
-    "topomatch.stages.mesh.decimate",
-    "topomatch.stages.mesh.noise",
-    "topomatch.stages.mesh.transform",
-    "topomatch.stages.mesh.measures",
-    "topomatch.stages.crosscheck.decimation",
-    "topomatch.stages.spectral.laplacian",
-    "topomatch.stages.spectral.fiedler",
-    "topomatch.stages.spectral.spectrum",
-    "topomatch.stages.spectral.heat_kernel",
-    "topomatch.stages.morse.stage",
-    "topomatch.stages.reeb.level_sets",
-    "topomatch.stages.reeb.reeb_graph",
-    "topomatch.stages.reeb.prune",
-    "topomatch.stages.crosscheck.libigl_reference",
-    "topomatch.stages.registration.io",
-    "topomatch.stages.registration.misalign",
-    "topomatch.stages.registration.register",
-    "topomatch.stages.registration.simpleitk_reference",
-    "topomatch.stages.registration.evaluate",
-    "topomatch.stages.registration.landscape",
-    "topomatch.stages.retrieval.descriptor",
-    "topomatch.stages.retrieval.baseline_stages",
-    "topomatch.pipeline.reports",
-    "topomatch.pipeline.skeleton_reports",
-    "topomatch.pipeline.retrieval_reports",
-    "topomatch.pipeline.registration_reports",
-)
-
-
-@dataclass(frozen=True)
-class StageSpec:
-    """One registered stage."""
-
-    name: str
-    func: Callable[..., Any]
-    params: type[Params]
-    version: int
-    consumes: tuple[str, ...]
-    produces: tuple[str, ...]
-    doc: str
-
-    def run(self, state_values: dict[str, Any], params: Params) -> Any:
-        """Call the stage on the consumed state values."""
-        args = [state_values[k] for k in self.consumes]
-        return self.func(*args, params=params)
-
+#: Packages whose modules are imported and searched for stages and reports (recursively).
+SCANNED_PACKAGES: tuple[str, ...] = ("topomatch.pipeline.builtin_reports", "topomatch.stages")
 
 STAGES: dict[str, StageSpec] = {}
+REPORTS: dict[str, ReportSpec] = {}
+_SCANNED: list[str] = []  # the modules searched so far, in order
 
 
-def stage(
-    name: str,
-    *,
-    params: type[Params],
-    version: int,
-    consumes: tuple[str, ...] = ("mesh",),
-    produces: tuple[str, ...] = (),
-) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
-    """Register ``func`` as the stage ``name`` (decorator)."""
+def scanned_modules(packages: tuple[str, ...] = SCANNED_PACKAGES) -> list[str]:
+    """Names of every module in ``packages`` (a package's own ``__init__`` included), sorted."""
+    names: list[str] = []
+    for name in packages:
+        module = importlib.import_module(name)
+        names.append(name)
+        if hasattr(module, "__path__"):
+            names += [m.name for m in pkgutil.walk_packages(module.__path__, prefix=name + ".")]
+    return sorted(set(names))
 
-    def register(func: Callable[..., Any]) -> Callable[..., Any]:
-        if name in STAGES and STAGES[name].func is not func:
-            raise RuntimeError(f"stage {name!r} registered twice")
-        doc = (func.__doc__ or "").strip().splitlines()[0] if func.__doc__ else ""
-        STAGES[name] = StageSpec(name, func, params, version, tuple(consumes), tuple(produces), doc)
-        return func
 
-    return register
+def _collect(module) -> None:
+    for obj in vars(module).values():
+        if getattr(obj, "__module__", None) != module.__name__:
+            continue  # imported from elsewhere: registered by its own module
+        for attr, table in (("stage_spec", STAGES), ("report_spec", REPORTS)):
+            spec = getattr(obj, attr, None)
+            if spec is None:
+                continue
+            known = table.get(spec.name)
+            if known is not None and known.func is not spec.func:
+                raise RuntimeError(f"{attr.split('_')[0]} {spec.name!r} is defined twice: in "
+                                   f"{known.func.__module__} and {module.__name__}")
+            table[spec.name] = spec
 
 
 def discover() -> dict[str, StageSpec]:
-    """Import all stage modules so that they register; return the registry."""
-    for module in STAGE_MODULES:
-        importlib.import_module(module)
+    """Import the scanned modules (once) and register their stages and reports; return the stages."""
+    if not _SCANNED:
+        for name in scanned_modules():
+            _collect(importlib.import_module(name))
+            _SCANNED.append(name)
+        from topomatch.pipeline.codec import register_types
+
+        register_types(importlib.import_module(name) for name in _SCANNED)
     return STAGES
+
+
+def register_module(module) -> None:
+    """Register the stages and reports of a module outside the scanned packages (a script, a notebook,
+    a test), and allow its result types in the cache. Call it after :func:`discover`."""
+    from topomatch.pipeline.codec import register_types
+
+    discover()
+    _collect(module)
+    register_types([module])
 
 
 def get_stage(name: str) -> StageSpec:
@@ -108,8 +81,16 @@ def get_stage(name: str) -> StageSpec:
     try:
         return STAGES[name]
     except KeyError:
-        known = ", ".join(sorted(STAGES))
-        raise ConfigError(f"unknown stage {name!r}; known stages: {known}") from None
+        raise ConfigError(f"unknown stage {name!r}; known stages: {', '.join(sorted(STAGES))}") from None
+
+
+def get_report(name: str) -> ReportSpec:
+    """The report called ``name``; a :class:`ConfigError` listing the known names otherwise."""
+    discover()
+    try:
+        return REPORTS[name]
+    except KeyError:
+        raise ConfigError(f"unknown report {name!r}; known reports: {', '.join(sorted(REPORTS))}") from None
 
 
 def type_label(hint: Any) -> str:
@@ -127,7 +108,6 @@ def describe_params(params: type[Params]) -> list[tuple[str, str, Any, str]]:
     hints = typing.get_type_hints(params)
     for field_name, field in params.model_fields.items():
         hint = hints.get(field_name, field.annotation)
-        type_name = type_label(hint)
         default = field.get_default(call_default_factory=True)
-        rows.append((field_name, type_name, default, field.description or ""))
+        rows.append((field_name, type_label(hint), default, field.description or ""))
     return rows

@@ -25,7 +25,7 @@ from typing import Any
 import yaml
 from tqdm import tqdm
 
-from topomatch.pipeline.cache import atomic_write_text
+from topomatch.pipeline.files import atomic_write_text
 from topomatch.pipeline.config import Experiment
 from topomatch.pipeline.executors import execute
 from topomatch.pipeline.item import ItemResult

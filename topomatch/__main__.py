@@ -2,6 +2,6 @@
 
 import sys
 
-from topomatch.pipeline.cli import main
+from topomatch.cli import main
 
 sys.exit(main())

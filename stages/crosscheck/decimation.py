@@ -30,9 +30,7 @@ from dataclasses import dataclass
 
 from pydantic import Field
 
-from topomatch.pipeline.errors import StageError
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import StageError, StageResult, stage
 from topomatch.stages.mesh.decimate import DecimateParams, simplify_to_target
 from topomatch.stages.mesh.measures import bbox_diagonal
 from topomatch.stages.mesh.mesh import Mesh

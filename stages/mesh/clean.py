@@ -34,10 +34,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.errors import InputError
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import InputError, Params, StageResult, stage
 from topomatch.stages.mesh.measures import bbox_diagonal
 from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
 from topomatch.stages.mesh.mesh import Mesh

@@ -39,10 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field, model_validator
 
-from topomatch.pipeline.errors import StageError
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageError, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.mesh.topology import edge_incidence
 

@@ -20,11 +20,7 @@ from typing import Iterator, Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.errors import InputError
-from topomatch.pipeline.paths import check_readable_file
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import InputError, Params, StageResult, check_readable_file, stage
 from topomatch.stages.mesh.mesh import Mesh
 
 SUPPORTED_SUFFIXES = (".off", ".obj", ".ply", ".stl")

@@ -12,9 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
 
 

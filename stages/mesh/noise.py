@@ -18,9 +18,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.mesh.measures import bbox_diagonal, mean_edge_length
 from topomatch.stages.mesh.mesh import Mesh
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.contract import StageError
 from topomatch.stages.morse.function import MorseFunction, normalized
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.contract import StageError
 from topomatch.stages.morse.centroid import CENTROIDS
 from topomatch.stages.morse.function import MorseFunction, normalized
 

@@ -24,7 +24,7 @@ from typing import Literal
 
 import numpy as np
 
-from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.contract import StageError
 from topomatch.stages.morse.centroid import CENTROIDS
 from topomatch.stages.morse.function import MorseFunction, normalized
 

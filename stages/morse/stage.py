@@ -8,9 +8,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.morse.function import MorseFunction
 
@@ -61,7 +59,7 @@ def morse_function(mesh: Mesh, params: MorseParams) -> MorseFunction:
         from topomatch.stages.morse.geodesic import geodesic_from_centroid
 
         return geodesic_from_centroid(mesh.V, mesh.F, centroid=params.centroid)
-    from topomatch.stages.spectral.fiedler import fiedler_function
+    from topomatch.stages.morse.fiedler import fiedler_function
 
     return fiedler_function(mesh, mass=params.mass)
 

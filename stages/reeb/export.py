@@ -13,7 +13,7 @@ from pathlib import Path
 import networkx as nx
 import numpy as np
 
-from topomatch.pipeline.cache import atomic_write_text
+from topomatch.pipeline.contract import atomic_write_text
 
 
 def _flat_graph(G: nx.MultiGraph, *, members_as_text: bool) -> nx.MultiGraph:

@@ -15,9 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 
 
 def level_values(f: np.ndarray, n_levels: int) -> np.ndarray:

@@ -26,9 +26,7 @@ import networkx as nx
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.reeb.reeb_graph import ROOT, ReebGraph
 
 

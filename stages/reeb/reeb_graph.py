@@ -41,9 +41,7 @@ from scipy.sparse import coo_matrix
 from pydantic import Field
 from scipy.sparse.csgraph import connected_components
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 
 from topomatch.stages.reeb.band_geometry import below
 from topomatch.stages.reeb.level_sets import band_index

@@ -19,10 +19,7 @@ from typing import Any, Literal
 
 from pydantic import Field
 
-from topomatch.pipeline.errors import StageError
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageError, StageResult, stage
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.register import Registration
 from topomatch.stages.registration.transform import RigidTransform, target_registration_error

@@ -22,11 +22,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.errors import InputError
-from topomatch.pipeline.paths import check_readable_file
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import InputError, Params, StageResult, check_readable_file, stage
 from topomatch.stages.registration.image import Image
 
 PILLOW_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")

@@ -13,9 +13,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.registration.divergence import similarity
 from topomatch.stages.registration.histogram import Binning, JointHistogram
 from topomatch.stages.registration.image import Image

@@ -20,10 +20,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.errors import StageError
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageError, StageResult, stage
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.interpolation import resample
 from topomatch.stages.registration.transform import RigidTransform

@@ -42,10 +42,7 @@ from typing import Callable, Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.errors import StageError
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageError, StageResult, stage
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.objective import build_pyramid, intensity_centroid, rms_radius
 from topomatch.stages.registration.powell import PowellSettings, powell_maximize

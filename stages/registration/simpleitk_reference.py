@@ -31,9 +31,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.register import Registration
 from topomatch.stages.registration.transform import RigidTransform, grid_points

@@ -1,10 +1,12 @@
 """Shape descriptors for retrieval, one per method, and the distances between them.
 
 A :class:`Descriptor` is either the endpoint features of a skeleton (RGPD: mixture
-distance; SRG: Fiedler vector; compared by endpoint correspondence, see
-:mod:`topomatch.stages.matching`) or a fixed-length vector (the baselines D2, spherical
-harmonics and ShapeDNA, compared by a vector distance). The ``descriptor`` state
-entry carries it from the stage that computes it to the index.
+distance; SRG: Fiedler vector; AGD with heat-kernel signatures; compared by endpoint
+correspondence, see :mod:`topomatch.stages.matching`) or a fixed-length vector (D2, spherical
+harmonics, ShapeDNA, HKS histograms, compared by a vector distance). The ``descriptor`` state
+entry carries it from the stage that computes it to the index. The endpoint descriptors' stages
+and the matching options are here; each vector descriptor has its own module; the methods are
+records of :mod:`topomatch.stages.retrieval.catalogue`.
 """
 
 from __future__ import annotations
@@ -15,9 +17,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.matching.features import endpoint_features, endpoint_signatures
 from topomatch.stages.spectral.heat_kernel import HKSTimes, heat_kernel_signature
 
@@ -87,6 +87,7 @@ class MatchOptions(Params):
         "greedy", description="globally closest pairs first, the literal sequential Algorithm 2, or optimal")
     dissimilarity: Literal["matched", "double_sum"] = Field(
         "matched", description="sum over matched pairs, or the literal double sum of eq. 3.12")
-    unmatched_cost: float = Field(0.0, ge=0, description="added per endpoint left without a partner")
+    unmatched_cost: float = Field(ge=0, allow_inf_nan=False, description="added per endpoint left without a partner "
+                                  "(each method's default is in its catalogue record)")
     endpoint_window: int | None = Field(None, ge=0, description="only compare skeletons whose endpoint "
                                         "counts differ by at most this (thesis indexing: 2-3); none = all")

@@ -1,6 +1,7 @@
 """Fusion of several descriptors' dissimilarities, and manifold-ranking re-ranking.
 
-The ``topomatch`` retrieval method (:data:`FUSIONS`) ranks shapes by several complementary
+A fused retrieval method (a record of :mod:`topomatch.stages.retrieval.catalogue`, e.g.
+``topomatch``) ranks shapes by several complementary
 descriptors at once: the intrinsic skeleton (AGD Reeb graph with heat-kernel endpoint
 signatures), the heat-kernel-signature histograms, ShapeDNA, D2 and the spherical harmonic
 descriptor. Each part's dissimilarities are divided by that part's **median dissimilarity over
@@ -34,7 +35,7 @@ class Fusion:
     Attributes
     ----------
     parts : tuple of str
-        Method names (keys of :data:`topomatch.stages.retrieval.methods.METHODS`), equally weighted.
+        Method names (keys of :data:`topomatch.stages.retrieval.catalogue.METHODS`), equally weighted.
     rerank_k : int or None
         Neighbours of the manifold-ranking graph; None = no re-ranking.
     rerank_alpha : float
@@ -42,13 +43,8 @@ class Fusion:
     """
 
     parts: tuple[str, ...]
-    rerank_k: int | None = 10
-    rerank_alpha: float = 0.9
-
-
-FUSIONS: dict[str, Fusion] = {
-    "topomatch": Fusion(("agd", "hks", "shapedna", "d2", "sh")),
-}
+    rerank_k: int | None
+    rerank_alpha: float
 
 
 def median_scale(D: np.ndarray) -> float:

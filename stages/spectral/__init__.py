@@ -5,7 +5,7 @@
   stage ``laplacian``.
 - :mod:`topomatch.stages.spectral.eigensolver`: smallest generalised eigenpairs ``Q phi = lambda K phi``
   (shift-invert block Krylov, multilevel, LOBPCG + AMG, dense) and the sign rule.
-- :mod:`topomatch.stages.spectral.fiedler`: the Fiedler vector ``phi2`` as a Morse function; stage ``fiedler``.
+- the Fiedler vector ``phi2`` as a Morse function (stage ``fiedler``) is :mod:`topomatch.stages.morse.fiedler`.
 
 See ``docs/spectral.md`` for the design and the measured speed.
 """

@@ -88,7 +88,7 @@ import scipy.linalg as la
 import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
-from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.contract import StageError
 
 Method = Literal["auto", "shift_invert", "multilevel", "lobpcg", "dense"]
 SignRule = Literal["skewness", "max_abs"]

@@ -11,8 +11,9 @@ surface (``h_t / (1/A) sum_x m_x h_t(x)``), which removes the ``1 / A`` of ``phi
 logarithm is taken. With the default 60 eigenpairs the smallest time 0.005 A still has
 ``exp(-lambda_60 t) ~ exp(-60 * 4 pi * 0.005) ~ 0.02``: the truncation is harmless there.
 
-The shape descriptor (``hks`` stage) is the area-weighted histogram of the log signature at each
-time (bins on [-3, 3]), concatenated: (times * bins,); compared with the L1 distance.
+The shape descriptor built from it (histograms, the ``hks`` stage) is in
+:mod:`topomatch.stages.retrieval.hks`; the endpoint signatures in
+:mod:`topomatch.stages.retrieval.descriptor`.
 """
 
 from __future__ import annotations
@@ -20,8 +21,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
+from topomatch.pipeline.contract import Params
 from topomatch.stages.spectral.spectrum import Spectrum
 
 
@@ -42,35 +42,3 @@ class HKSTimes(Params):
 
     def times(self) -> np.ndarray:
         return np.geomspace(self.t_min, self.t_max, self.n_times)
-
-
-class HKSParams(HKSTimes):
-    """Times and histogram of the ``hks`` descriptor."""
-
-    bins: int = Field(32, ge=2, le=1024, description="histogram bins per time on [-3, 3] (log HKS / mean)")
-
-
-def hks_histograms(spectrum: Spectrum, params: HKSParams) -> np.ndarray:
-    """(n_times * bins,) area-weighted histograms of the log HKS, each summing to 1."""
-    S = heat_kernel_signature(spectrum, params.times())
-    edges = np.linspace(-3.0, 3.0, params.bins + 1)
-    out = []
-    for column in S.T:
-        h, _ = np.histogram(np.clip(column, -3.0, 3.0), bins=edges, weights=spectrum.mass)
-        out.append(h / h.sum())
-    return np.concatenate(out)
-
-
-def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
-    """(n, m) L1 distances between HKS histogram rows."""
-    from topomatch.stages.retrieval.baselines.vectors import pairwise
-
-    return pairwise(X, Y, metric="cityblock")
-
-
-@stage("hks", params=HKSParams, version=1, consumes=("spectrum",), produces=("descriptor",))
-def hks_stage(spectrum: Spectrum, *, params: HKSParams):
-    """Heat-kernel-signature histograms (Sun et al. 2009), scale-normalised."""
-    from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
-
-    return DescriptorResult(Descriptor("vector", hks_histograms(spectrum, params)))

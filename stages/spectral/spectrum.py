@@ -20,10 +20,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.errors import StageError
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageError, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
 
 #: Problems with at most this many vertices are solved densely (scipy.linalg.eigh).

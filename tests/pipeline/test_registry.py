@@ -5,8 +5,7 @@ from __future__ import annotations
 import pytest
 
 from topomatch.pipeline.errors import ConfigError
-from topomatch.pipeline.registry import describe_params, discover, get_stage
-from topomatch.pipeline.reports import REPORTS
+from topomatch.pipeline.registry import REPORTS, describe_params, discover, get_stage
 
 MINIMAL_PARAMS = {"decimate": {"ratio": 0.5}, "decimate_crosscheck": {"ratio": 0.5}}
 FOUNDATION_STAGES = {"load", "clean", "decimate", "decimate_crosscheck", "noise", "transform", "measures"}

@@ -4,15 +4,15 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import sys
 
 import numpy as np
 import pytest
 from pydantic import Field
 
 from topomatch.pipeline.config import build_experiment
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import STAGES, discover, stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
+from topomatch.pipeline.registry import STAGES, discover, register_module
 from topomatch.pipeline.runner import run_experiment
 
 
@@ -94,6 +94,9 @@ def _interrupting_stage(mesh, *, params):
     if mesh.name == params.fail_on:
         raise KeyboardInterrupt
     return _BoomResult(mesh.name)
+
+
+register_module(sys.modules[__name__])
 
 
 def test_interrupted_run_resumes_without_recomputing(small_config, tmp_path):

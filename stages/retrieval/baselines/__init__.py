@@ -1,6 +1,6 @@
 """Baseline shape descriptors measured side by side with the thesis methods.
 
-Each module has a frozen params class (a :class:`topomatch.pipeline.params.Params`), a pure
+Each module has a frozen params class (a :class:`topomatch.pipeline.contract.Params`), a pure
 ``descriptor(mesh, params) -> np.ndarray``, a ``distance(a, b) -> float`` and a vectorised
 ``distance_matrix(X, Y=None) -> (n, m)``:
 
@@ -13,38 +13,8 @@ module                        descriptor                               shape    
 :mod:`.shapedna`              ShapeDNA (Reuter 2006), lambda_i A / i   (k,) = (30,)        L2
 ============================  =======================================  ==================  ========
 
-:data:`BASELINES` maps a short name to a :class:`Baseline` record for wiring into stages
-and the index. :mod:`.sampling` holds the shared surface sampler.
+:mod:`.sampling` holds the shared surface sampler. Each module also defines its pipeline stage
+(``d2``, ``spherical_harmonics``, ``shapedna``); the retrieval methods that use them are records of
+:mod:`topomatch.stages.retrieval.catalogue`.
 """
 
-from __future__ import annotations
-
-from typing import Callable, NamedTuple
-
-import numpy as np
-
-from topomatch.pipeline.params import Params
-from topomatch.stages.retrieval.baselines import d2, shapedna, spherical_harmonics
-
-
-class Baseline(NamedTuple):
-    """One baseline descriptor: its params type, functions and metric name."""
-
-    name: str
-    params: type[Params]
-    descriptor: Callable[..., np.ndarray]
-    distance: Callable[[np.ndarray, np.ndarray], float]
-    distance_matrix: Callable[..., np.ndarray]
-    metric: str
-
-
-BASELINES: dict[str, Baseline] = {
-    "d2": Baseline("d2", d2.D2Params, d2.descriptor, d2.distance, d2.distance_matrix, "L1"),
-    "spherical_harmonics": Baseline("spherical_harmonics", spherical_harmonics.SphericalHarmonicsParams,
-                                    spherical_harmonics.descriptor, spherical_harmonics.distance,
-                                    spherical_harmonics.distance_matrix, "L2"),
-    "shapedna": Baseline("shapedna", shapedna.ShapeDNAParams, shapedna.descriptor, shapedna.distance,
-                         shapedna.distance_matrix, "L2"),
-}
-
-__all__ = ["BASELINES", "Baseline", "d2", "shapedna", "spherical_harmonics"]

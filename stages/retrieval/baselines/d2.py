@@ -35,10 +35,11 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
+from topomatch.pipeline.contract import Params, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.retrieval.baselines.sampling import checked_areas, sample_surface
 from topomatch.stages.retrieval.baselines.vectors import pairwise
+from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
 
 
 class D2Params(Params):
@@ -116,3 +117,9 @@ def distance(a: np.ndarray, b: np.ndarray) -> float:
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
     """All pairwise L1 distances: ``X`` (n, bins), ``Y`` (m, bins) (default ``X``) -> (n, m) float64."""
     return pairwise(X, Y, metric="cityblock")
+
+
+@stage("d2", params=D2Params, version=1, consumes=("mesh",), produces=("descriptor",))
+def d2_stage(mesh: Mesh, *, params: D2Params) -> DescriptorResult:
+    """D2 shape distribution (Osada et al. 2002): histogram of random surface-point distances."""
+    return DescriptorResult(Descriptor("vector", descriptor(mesh, params)))

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from topomatch.pipeline.errors import InputError
+from topomatch.pipeline.contract import InputError
 from topomatch.stages.mesh.mesh import Mesh
 
 

@@ -50,10 +50,10 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.errors import StageError
-from topomatch.pipeline.params import Params
+from topomatch.pipeline.contract import Params, StageError, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.retrieval.baselines.vectors import pairwise
+from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
 
 Normalization = Literal["area", "area_index", "none"]
 
@@ -184,3 +184,9 @@ def distance(a: np.ndarray, b: np.ndarray) -> float:
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
     """All pairwise L2 distances: ``X`` (n, k), ``Y`` (m, k) (default ``X``) -> (n, m) float64."""
     return pairwise(X, Y, metric="euclidean")
+
+
+@stage("shapedna", params=ShapeDNAParams, version=3, consumes=("mesh",), produces=("descriptor",))
+def shapedna_stage(mesh: Mesh, *, params: ShapeDNAParams) -> DescriptorResult:
+    """ShapeDNA (Reuter et al. 2006): normalised leading Laplace-Beltrami eigenvalues."""
+    return DescriptorResult(Descriptor("vector", descriptor(mesh, params)))

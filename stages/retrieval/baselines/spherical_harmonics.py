@@ -59,10 +59,11 @@ from functools import lru_cache
 import numpy as np
 from pydantic import Field, model_validator
 
-from topomatch.pipeline.params import Params
+from topomatch.pipeline.contract import Params, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, checked_areas, sample_surface
 from topomatch.stages.retrieval.baselines.vectors import pairwise
+from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
 
 
 class SphericalHarmonicsParams(Params):
@@ -238,3 +239,10 @@ def distance(a: np.ndarray, b: np.ndarray) -> float:
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
     """All pairwise L2 distances: ``X`` (n, radii, bands + 1) or (n, d), ``Y`` likewise -> (n, m)."""
     return pairwise(X, Y, metric="euclidean")
+
+
+@stage("spherical_harmonics", params=SphericalHarmonicsParams, version=1, consumes=("mesh",),
+       produces=("descriptor",))
+def spherical_harmonics_stage(mesh: Mesh, *, params: SphericalHarmonicsParams) -> DescriptorResult:
+    """Rotation-invariant spherical harmonic descriptor (Kazhdan et al. 2003)."""
+    return DescriptorResult(Descriptor("vector", descriptor(mesh, params).ravel()))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from topomatch.pipeline.registry import STAGES
+from topomatch.pipeline.registry import get_stage
 from topomatch.stages.crosscheck.decimation import DecimationCrosscheckParams, decimate_crosscheck, meshlab_decimate
 from topomatch.stages.mesh.decimate import DecimateParams, decimate, target_tolerance
 
@@ -50,7 +50,7 @@ def test_meshlab_decimate_reaches_target_without_unreferenced_vertices(bundled_m
 
 
 def test_stage_is_registered_as_a_side_branch():
-    spec = STAGES["decimate_crosscheck"]
+    spec = get_stage("decimate_crosscheck")
     assert spec.consumes == ("mesh",) and spec.produces == ()
 
 

@@ -60,7 +60,7 @@ def test_root_without_root_node_is_nearest_to_area_centroid():
 @pytest.mark.parametrize("name", ["odedstein_hand_closed.obj.gz", "odedstein_cat-low-resolution.obj.gz"])
 def test_features_invariant_to_similarity(bundled_mesh, name, function):
     from topomatch.stages.mesh.mesh import Mesh
-    from topomatch.stages.spectral.fiedler import fiedler_function
+    from topomatch.stages.morse.fiedler import fiedler_function
 
     m = bundled_mesh(name)
     R = Rotation.from_rotvec([0.3, -1.1, 0.4]).as_matrix()

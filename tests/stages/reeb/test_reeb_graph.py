@@ -9,7 +9,7 @@ from scipy.spatial.transform import Rotation
 
 from topomatch.stages.morse.height import principal_height
 from topomatch.stages.morse.mixture import mixture_distance
-from topomatch.stages.spectral.fiedler import fiedler_function
+from topomatch.stages.morse.fiedler import fiedler_function
 from topomatch.stages.reeb.level_sets import band_index, level_values
 from topomatch.stages.reeb.prune import make_skeleton
 from topomatch.stages.reeb.reeb_graph import ROOT, reeb_graph

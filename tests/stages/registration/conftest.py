@@ -8,22 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests_paths import REPO_ROOT
-
-ITK_DIR = REPO_ROOT / "data" / "images" / "itk"
-
-
-@pytest.fixture(scope="session")
-def itk_dir() -> Path:
-    return ITK_DIR
-
-
-@pytest.fixture(scope="session")
-def pd_slice():
-    """BrainProtonDensitySlice.png (217 x 181), the bundled ITK proton-density slice."""
-    from topomatch.stages.registration.io import read_image
-
-    return read_image(ITK_DIR / "BrainProtonDensitySlice.png")
+from tests_paths import ITK_DIR
 
 
 @pytest.fixture(scope="session")

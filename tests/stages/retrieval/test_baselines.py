@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 
 from topomatch.pipeline.errors import ConfigError, InputError, StageError
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.retrieval.baselines import BASELINES, d2, shapedna, spherical_harmonics as sh
+from topomatch.stages.retrieval.baselines import d2, shapedna, spherical_harmonics as sh
 from topomatch.stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, sample_surface, triangle_areas
 
 
@@ -248,10 +248,15 @@ def test_shapedna_rejects_bad_meshes(shapes):
 # --------------------------------------------------------------------------- all baselines
 
 
+#: Each baseline module and its params type.
+BASELINES = {"d2": (d2, d2.D2Params), "spherical_harmonics": (sh, sh.SphericalHarmonicsParams),
+             "shapedna": (shapedna, shapedna.ShapeDNAParams)}
+
+
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_distance_matrix_matches_distance(name, sphere, torus):
-    b = BASELINES[name]
-    params = b.params(k=10) if name == "shapedna" else b.params()
+    b, P = BASELINES[name]
+    params = P(k=10) if name == "shapedna" else P()
     X = np.stack([b.descriptor(m, params) for m in (sphere, torus)])
     D = b.distance_matrix(X)
     assert D.shape == (2, 2) and np.allclose(np.diag(D), 0) and D[0, 1] == pytest.approx(D[1, 0])
@@ -262,8 +267,9 @@ def test_distance_matrix_matches_distance(name, sphere, torus):
 @pytest.mark.parametrize("name", sorted(BASELINES))
 def test_empty_or_flat_meshes_are_rejected(name):
     empty = Mesh(np.zeros((3, 3)), np.zeros((0, 3)), name="empty")
+    b, P = BASELINES[name]
     with pytest.raises(InputError, match="empty"):
-        BASELINES[name].descriptor(empty, BASELINES[name].params())
+        b.descriptor(empty, P())
 
 
 def test_zero_area_mesh_is_rejected():
@@ -279,8 +285,8 @@ def test_params_parse_strictly():
         d2.D2Params.parse({"bins": "32"}, "stages[1].d2")
     with pytest.raises(ConfigError, match="normalization"):
         shapedna.ShapeDNAParams.parse({"normalization": "max"}, "stages[2].shapedna")
-    for b in BASELINES.values():
-        for field in b.params.model_fields.values():
+    for _, P in BASELINES.values():
+        for field in P.model_fields.values():
             assert field.description
 
 

@@ -49,12 +49,12 @@ def test_fused_query_of_a_duplicate_ranks_it_first():
     q = X[7] + 1e-9
     rows = [cdist(q[None], X)[0], cdist(q[None], X, "cityblock")[0]]
     for k in (None, 5):
-        d = fused_query(rows, parts, Fusion(("a", "b"), k))
+        d = fused_query(rows, parts, Fusion(("a", "b"), k, 0.9))
         assert np.argmin(d) == 7 and d.shape == (60,)
     # without re-ranking the fused row is the scaled sum
-    d = fused_query(rows, parts, Fusion(("a", "b"), None))
+    d = fused_query(rows, parts, Fusion(("a", "b"), None, 0.9))
     np.testing.assert_allclose(d, rows[0] / median_scale(parts[0]) + rows[1] / median_scale(parts[1]))
-    assert fused_matrix(parts, Fusion(("a", "b"), None)) == pytest.approx(fuse(parts, [median_scale(p) for p in parts]))
+    assert fused_matrix(parts, Fusion(("a", "b"), None, 0.9)) == pytest.approx(fuse(parts, [median_scale(p) for p in parts]))
 
 
 def test_one_row_ranks_as_the_full_ranking():

@@ -121,9 +121,9 @@ def test_several_components_are_rejected_with_a_fix(shapes):
 
 
 def test_stage_and_params(bundled_mesh):
-    from topomatch.pipeline.registry import STAGES
+    from topomatch.pipeline.registry import get_stage
 
-    spec = STAGES["laplacian"]
+    spec = get_stage("laplacian")
     assert spec.consumes == ("mesh",) and spec.produces == ("laplacian",)
     mesh = bundled_mesh("odedstein_spot_low_resolution.obj.gz")
     result = laplacian_stage(mesh, params=LaplacianParams.parse({"mass": "voronoi"}, "stages[1].laplacian"))

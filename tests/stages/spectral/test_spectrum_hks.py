@@ -8,7 +8,8 @@ from shapes import icosphere
 
 from topomatch.stages.mesh.io import read_mesh
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.spectral.heat_kernel import HKSParams, heat_kernel_signature, hks_histograms
+from topomatch.stages.retrieval.hks import HKSParams, hks_histograms
+from topomatch.stages.spectral.heat_kernel import heat_kernel_signature
 from topomatch.stages.spectral.spectrum import mesh_spectrum
 from tests_paths import BUNDLED_MESHES
 

@@ -8,13 +8,13 @@ import pytest
 from topomatch.pipeline.errors import ConfigError, InputError
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.morse.function import MorseFunction
-from topomatch.stages.spectral.fiedler import FiedlerParams, fiedler, fiedler_function
+from topomatch.stages.morse.fiedler import FiedlerParams, fiedler, fiedler_function
 
 
 def test_stage_is_registered_with_its_data_flow():
-    from topomatch.pipeline.registry import STAGES
+    from topomatch.pipeline.registry import get_stage
 
-    spec = STAGES["fiedler"]
+    spec = get_stage("fiedler")
     assert spec.consumes == ("mesh",) and spec.produces == ("function",)
     assert spec.params is FiedlerParams
 

@@ -10,7 +10,7 @@ import pytest
 
 
 def topomatch(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "topomatch.pipeline.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "topomatch", *map(str, args)],
                           capture_output=True, text=True, cwd=cwd, timeout=300)
 
 

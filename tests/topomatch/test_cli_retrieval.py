@@ -9,7 +9,7 @@ import sqlite3
 import numpy as np
 import pytest
 
-from topomatch.pipeline.cli import main
+from topomatch.cli import main
 from tests_paths import BUNDLED_MESHES
 
 MESHES = ["torus.off", "eight_genus2.off", "odedstein_human_man.obj.gz", "odedstein_human_woman.obj.gz",
@@ -97,7 +97,9 @@ def test_match_prints_correspondence(capsys):
     result = json.loads(out)
     assert code == 0 and result["endpoints_a"] >= 5 and result["endpoints_b"] >= 5
     assert len(result["correspondence"]) == min(result["endpoints_a"], result["endpoints_b"])
-    assert result["dissimilarity"] == pytest.approx(sum(p["cost"] for p in result["correspondence"]))
+    # the method's own unmatched cost (0.2 for rgpd) for each endpoint left without a partner
+    unmatched = abs(result["endpoints_a"] - result["endpoints_b"])
+    assert result["dissimilarity"] == pytest.approx(sum(p["cost"] for p in result["correspondence"]) + 0.2 * unmatched)
 
 
 def test_errors(tmp_path, capsys):

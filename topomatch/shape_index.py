@@ -5,7 +5,7 @@ Schema (table ``shapes``)::
     content_hash  SHA-256 of the mesh file's name and bytes
     path          the file as indexed
     label         class label, if known (from --labels CSV)
-    method        rgpd | srg | agd | hks | d2 | sh | shapedna (a fusion stores its parts)
+    method        a method of topomatch.stages.retrieval.catalogue (a fusion stores its parts)
     params_hash   hash of the method's resolved stage chain (params and versions)
     params        that chain as JSON
     status        ok | failed
@@ -23,7 +23,6 @@ is committed as soon as its mesh is done.
 
 from __future__ import annotations
 
-import csv
 import io
 import json
 import sqlite3
@@ -33,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from topomatch.pipeline.errors import InputError
+from topomatch.pipeline.contract import InputError
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS shapes (
@@ -152,19 +151,3 @@ class ShapeIndex:
         """(method, params_hash, ok rows) present in the index."""
         return list(self.db.execute(
             "SELECT method, params_hash, SUM(status = 'ok') FROM shapes GROUP BY method, params_hash"))
-
-
-def read_labels(path: str | Path) -> dict[str, str]:
-    """{resolved mesh path: label} from a CSV with relative_path|path and class|label columns."""
-    path = Path(path)
-    if not path.exists():
-        raise InputError(path, "labels file not found")
-    with open(path, newline="", encoding="utf-8") as fh:
-        reader = csv.DictReader(fh)
-        cols = reader.fieldnames or []
-        pcol = next((c for c in ("relative_path", "path") if c in cols), None)
-        lcol = next((c for c in ("class", "label") if c in cols), None)
-        if pcol is None or lcol is None:
-            raise InputError(path, f"labels CSV needs a relative_path (or path) and a class (or label) column; "
-                                   f"found {', '.join(cols)}")
-        return {str((path.parent / row[pcol]).resolve()): row[lcol] for row in reader}

@@ -9,7 +9,7 @@ import networkx as nx
 import numpy as np
 import pytest
 
-from topomatch.pipeline.cli import main
+from topomatch.cli import main
 from tests_paths import BUNDLED_MESHES
 
 REQUIRED = {"n_vertices", "n_faces", "genus", "n_nodes", "n_edges", "n_endpoints", "cycle_rank", "lambda2", "seconds"}

@@ -1,26 +1,18 @@
-"""The ``topomatch`` command line.
-
-Subcommands: ``run`` (run an experiment config), ``validate`` (check a config
-without running it), ``stages`` (list the stages and reports with their
-parameters). Errors print one short message naming the file and the problem
-and exit non-zero (2 for a bad config or usage, 1 for bad input data or failed
-items); ``--debug`` shows the traceback instead.
-"""
+"""``topomatch run | validate | stages | configs``: experiment configs and the stage registry."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import sys
-from pathlib import Path
 
-from topomatch import __version__
-from topomatch.pipeline.errors import RunError, TopomatchError
-from topomatch.pipeline.paths import DATA_ROOT_ENV, data_root
+from topomatch.pipeline.errors import RunError
+from topomatch.pipeline.paths import DATA_ROOT_ENV
 
 
 def _add_config_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("config", help="experiment config (YAML)")
+    p.add_argument("config", help="experiment config (YAML); an installed one by its name also works "
+                                  "(see `topomatch configs`)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value: stage.param=value (noise.sigma=0.01) or a config key "
                         "(executor.kind=dask); repeatable")
@@ -28,16 +20,7 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
                                                        f"(default: ${DATA_ROOT_ENV})")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="topomatch",
-        description="Topological shape skeletons, shape matching and retrieval, and entropic image "
-                    "registration, run as reproducible YAML experiments.",
-    )
-    parser.add_argument("--version", action="version", version=f"topomatch {__version__}")
-    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-
+def add_parsers(sub) -> None:
     p = sub.add_parser("run", help="run an experiment config", description="Run an experiment config and "
                        "write its run folder (config, manifest, tables, figures, index.html).")
     _add_config_args(p)
@@ -58,22 +41,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print JSON")
     p.set_defaults(handler=cmd_stages)
 
-    from topomatch.pipeline.retrieval_cli import add_parsers as add_retrieval
-    from topomatch.pipeline.skeleton_cli import add_parser as add_skeleton
-
-    add_skeleton(sub)
-    from topomatch.pipeline.register_cli import add_parser as add_register
-
-    add_register(sub)
-    add_retrieval(sub)
-    return parser
+    p = sub.add_parser("configs", help="list the installed experiment configs",
+                       description="List the experiment configs installed with topomatch (run one by its path "
+                                   "or name: topomatch run retrieval/demo).")
+    p.set_defaults(handler=cmd_configs)
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from topomatch.pipeline.config import load_experiment
+    from topomatch.experiments import load_config
     from topomatch.pipeline.runner import run_experiment
 
-    experiment = load_experiment(args.config, overrides=args.overrides, data_root=data_root(args.data_root))
+    experiment = load_config(args.config, overrides=args.overrides, data_root_dir=args.data_root)
     n = len(experiment.items())
     print(f"{experiment.name}: {len(experiment.inputs)} inputs x {len(experiment.sweep_points())} sweep points "
           f"= {n} items, {len(experiment.calls)} stages", file=sys.stderr)
@@ -97,32 +75,27 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from topomatch.pipeline.config import load_experiment
+    from topomatch.experiments import load_config
 
-    experiment = load_experiment(args.config, overrides=args.overrides, data_root=data_root(args.data_root))
-    print(f"{args.config}: ok ({experiment.name}: {len(experiment.inputs)} inputs, "
+    experiment = load_config(args.config, overrides=args.overrides, data_root_dir=args.data_root)
+    print(f"{experiment.source}: ok ({experiment.name}: {len(experiment.inputs)} inputs, "
           f"{len(experiment.sweep_points())} sweep points, {len(experiment.calls)} stages, "
           f"{len(experiment.reports)} reports)")
     return 0
 
 
 def cmd_stages(args: argparse.Namespace) -> int:
-    from topomatch.pipeline.registry import describe_params, discover
-    from topomatch.pipeline.reports import REPORTS
+    from topomatch.pipeline.registry import REPORTS, describe_params, discover
 
     stages = discover()
+
+    def params(spec) -> list[dict]:
+        return [dict(zip(("name", "type", "default", "description"), row)) for row in describe_params(spec.params)]
+
     listing = {
-        "stages": {
-            name: {"version": s.version, "consumes": list(s.consumes), "produces": list(s.produces), "doc": s.doc,
-                   "params": [dict(zip(("name", "type", "default", "description"), row))
-                              for row in describe_params(s.params)]}
-            for name, s in sorted(stages.items())
-        },
-        "reports": {
-            name: {"doc": r.doc, "params": [dict(zip(("name", "type", "default", "description"), row))
-                                            for row in describe_params(r.params)]}
-            for name, r in sorted(REPORTS.items())
-        },
+        "stages": {name: {"version": s.version, "consumes": list(s.consumes), "produces": list(s.produces),
+                          "doc": s.doc, "params": params(s)} for name, s in sorted(stages.items())},
+        "reports": {name: {"doc": r.doc, "params": params(r)} for name, r in sorted(REPORTS.items())},
     }
     if args.json:
         print(json.dumps(listing, indent=2, default=str))
@@ -142,20 +115,10 @@ def cmd_stages(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return args.handler(args)
-    except TopomatchError as exc:
-        if args.debug:
-            raise
-        print(f"topomatch: error: {exc}", file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:
-        print("topomatch: interrupted; finished stages are cached, run again to resume", file=sys.stderr)
-        return 130
+def cmd_configs(args: argparse.Namespace) -> int:
+    from topomatch.experiments import CONFIGS_DIR, bundled_configs
 
-
-if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    for path in bundled_configs():
+        print(path.relative_to(CONFIGS_DIR).as_posix())
+    print(f"({CONFIGS_DIR})", file=sys.stderr)
+    return 0

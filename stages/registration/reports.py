@@ -20,8 +20,7 @@ from typing import Any, Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.reports import ReportOutput, report
+from topomatch.pipeline.contract import Params, ReportOutput, report
 
 _NAME = dict(pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure or table")
 

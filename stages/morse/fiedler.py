@@ -22,9 +22,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.registry import stage
-from topomatch.pipeline.result import StageResult
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.morse.function import MorseFunction
 from topomatch.stages.spectral.eigensolver import Eigenpairs, relative_gap, smallest_eigenpairs

@@ -36,7 +36,7 @@ def tables(outcome, name):
 
 def test_benchmark_report_with_a_fusion(labels_csv, tmp_path):
     cfg = config(labels_csv, [{"retrieval_benchmark": {"name": "b", "labels": str(labels_csv), "methods": METHODS,
-                                                       "fusions": {"both": ["d2", "shapedna"]}, "rerank_k": 2,
+                                                       "extra_fusions": {"both": ["d2", "shapedna"]}, "rerank_k": 2,
                                                        "thumbnails": False, "table_classes": ["handles", "body"],
                                                        "queries": []}}])
     outcome = run_experiment(build_experiment(cfg), out_root=tmp_path / "runs", progress=False)
@@ -50,7 +50,7 @@ def test_benchmark_report_with_a_fusion(labels_csv, tmp_path):
 
 def test_robustness_report_rotated_and_scaled_queries_find_their_original(labels_csv, tmp_path):
     cfg = config(labels_csv, [{"retrieval_robustness": {"name": "r", "labels": str(labels_csv), "methods": METHODS,
-                                                        "fusions": {"both": ["d2", "shapedna"]}, "rerank_k": 2}}],
+                                                        "extra_fusions": {"both": ["d2", "shapedna"]}, "rerank_k": 2}}],
                  sweep={"transform.angle_deg": [0.0, 75.0], "transform.scale": [1.0, 3.0]},
                  sweep_mode="one_at_a_time")
     outcome = run_experiment(build_experiment(cfg), out_root=tmp_path / "runs", progress=False)

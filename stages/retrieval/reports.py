@@ -1,7 +1,8 @@
 """Retrieval benchmark report: several descriptor methods of the same run compared on labelled meshes.
 
-For every method (a stage label whose result carries a ``descriptor``) and every fusion of
-methods (:mod:`topomatch.stages.retrieval.fusion`) it computes the full dissimilarity matrix, the PSB
+For every method (a catalogue method, :mod:`topomatch.stages.retrieval.catalogue`, whose descriptor
+a stage label of the chain holds) and every fusion of the catalogue whose parts are all there
+(:mod:`topomatch.stages.retrieval.fusion`) it computes the full dissimilarity matrix, the PSB
 metrics (:mod:`topomatch.stages.retrieval.metrics`), and writes:
 
 - ``<name>_metrics``: micro and macro NN, FT, ST, E, DCG, mAP per method (table);
@@ -18,29 +19,77 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from typing import Literal
+
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
-from topomatch.pipeline.errors import ConfigError
-from topomatch.pipeline.params import Params
-from topomatch.pipeline.paths import resolve_input
-from topomatch.pipeline.reports import ReportOutput, report
-from topomatch.pipeline.shape_index import read_labels
+from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, report
+from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, METHODS, Method, get_method
+from topomatch.stages.retrieval.fusion import Fusion
+from topomatch.stages.retrieval.labels import read_labels
 
 
-class RetrievalBenchmarkParams(Params):
-    name: str = Field("retrieval", pattern=r"^[A-Za-z0-9_.-]+$", description="prefix of the output files")
-    methods: dict[str, str] = Field(description="method name -> stage label holding its descriptor, e.g. "
+class MethodsParams(Params):
+    """Which methods a retrieval report compares (shared by the benchmark and the robustness reports)."""
+
+    methods: dict[str, str] = Field(description="catalogue method -> stage label holding its descriptor, e.g. "
                                                 "{rgpd: endpoint_descriptor, d2: d2}")
+    fusions: list[str] = Field(default_factory=list, description="catalogue fusions to rank too (their parts must "
+                                                                 "be in methods), e.g. [topomatch]")
+    extra_fusions: dict[str, list[str]] = Field(default_factory=dict, description="ad-hoc fusions for experiments: "
+                                                "name -> methods (re-ranked like the default fusion)")
+    rerank_k: int | None = Field(None, ge=1, description="fusions: neighbours of the manifold-ranking graph "
+                                                         "(none: the fusion's own)")
+    rerank_alpha: float | None = Field(None, gt=0, lt=1, description="fusions: manifold-ranking diffusion weight "
+                                                                     "(none: the fusion's own)")
     labels: str = Field(description="CSV with relative_path and class columns (path template)")
-    fusions: dict[str, list[str]] = Field(default_factory=dict, description="fused method name -> the methods "
-                                          "it sums (names from 'methods'), e.g. {topomatch: [agd, hks, d2]}")
-    rerank_k: int | None = Field(10, ge=1, description="fusions: neighbours of the manifold-ranking graph; "
-                                                       "none = no re-ranking")
-    rerank_alpha: float = Field(0.9, gt=0, lt=1, description="fusions: manifold-ranking diffusion weight")
-    unmatched_cost: float | None = Field(None, ge=0, description="endpoint methods: cost per unmatched endpoint "
-                                                                 "(none: the method's default, UNMATCHED_COST)")
-    correspondence: str = Field("greedy", pattern="^(greedy|greedy_sequential|optimal)$")
+    unmatched_cost: float | None = Field(None, ge=0, allow_inf_nan=False,
+                                         description="endpoint methods: cost per unmatched endpoint (none: each "
+                                                     "method's own)")
+    correspondence: Literal["greedy", "greedy_sequential", "optimal"] | None = Field(
+        None, description="endpoint methods: correspondence (none: each method's own)")
+
+    @field_validator("methods")
+    @classmethod
+    def _known_methods(cls, value: dict[str, str]) -> dict[str, str]:
+        for name in value:
+            if name not in METHODS or METHODS[name].kind == "fusion":
+                raise ValueError(f"{name!r} is not a method of the catalogue (methods: "
+                                 f"{', '.join(m.name for m in METHODS.values() if m.kind != 'fusion')})")
+        return value
+
+    @field_validator("fusions")
+    @classmethod
+    def _known_fusions(cls, value: list[str]) -> list[str]:
+        for name in value:
+            if name not in METHODS or METHODS[name].kind != "fusion":
+                raise ValueError(f"{name!r} is not a fusion of the catalogue (fusions: "
+                                 f"{', '.join(m.name for m in METHODS.values() if m.kind == 'fusion')})")
+        return value
+
+    def method(self, name: str) -> Method:
+        """The catalogue record of a method named in the report (ConfigError for an unknown one)."""
+        return get_method(name)
+
+    def all_fusions(self) -> dict[str, Fusion]:
+        """The catalogue fusions and the ad-hoc ones, with this report's re-ranking overrides."""
+        base = {name: get_method(name).fusion for name in self.fusions}
+        default = get_method(DEFAULT_METHOD).fusion
+        base.update({name: Fusion(tuple(parts), default.rerank_k, default.rerank_alpha)
+                     for name, parts in self.extra_fusions.items()})
+        out = {}
+        for name, f in base.items():
+            missing = [p for p in f.parts if p not in self.methods]
+            if missing:
+                raise ConfigError(f"fusion {name}: its parts {', '.join(missing)} are not in methods")
+            out[name] = Fusion(f.parts, self.rerank_k if self.rerank_k is not None else f.rerank_k,
+                               self.rerank_alpha if self.rerank_alpha is not None else f.rerank_alpha)
+        return out
+
+
+class RetrievalBenchmarkParams(MethodsParams):
+    name: str = Field("retrieval", pattern=r"^[A-Za-z0-9_.-]+$", description="prefix of the output files")
     table_classes: list[str] = Field(default_factory=lambda: ["human", "glasses", "ant", "octopus", "teddy", "hand",
                                                               "plier"],
                                      description="classes of the 7x7 table (one model each: the first)")
@@ -50,9 +99,7 @@ class RetrievalBenchmarkParams(Params):
 
 
 def _labels(experiment, template: str) -> dict[str, str]:
-    base = experiment.source.parent if experiment.source else Path.cwd()
-    (path,) = resolve_input(template, base_dir=base, root=experiment.data_root, where="reports.retrieval.labels")[:1]
-    return read_labels(path)
+    return read_labels(experiment.resolve_path(template, where="labels"))
 
 
 @report("retrieval_benchmark", params=RetrievalBenchmarkParams)
@@ -60,28 +107,26 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
     """PSB metrics, precision-recall curves, a 7x7 dissimilarity table and top-10 grids per method."""
     import matplotlib.pyplot as plt
 
-    from topomatch.stages.retrieval.fusion import Fusion, fused_matrix
+    from topomatch.stages.retrieval.fusion import fused_matrix
     from topomatch.stages.retrieval.metrics import retrieval_metrics
 
+    fusions = params.all_fusions()
     labels = _labels(experiment, params.labels)
     items = [r for r in results if r.ok and str(Path(r.input_path).resolve()) in labels]
     if len(items) < 2:
         raise ConfigError(f"retrieval_benchmark: fewer than two labelled items (labels: {params.labels})")
     y = np.array([labels[str(Path(r.input_path).resolve())] for r in items])
     matrices = {method: _method_matrix(items, method, label, params) for method, label in params.methods.items()}
-    for name, parts in params.fusions.items():
-        unknown = [p for p in parts if p not in matrices]
-        if unknown:
-            raise ConfigError(f"retrieval_benchmark.fusions.{name}: {', '.join(unknown)} not in methods")
     out = ReportOutput()
     ablation = []
-    for name, parts in params.fusions.items():
+    for name, fusion in fusions.items():
+        parts = list(fusion.parts)
         kept = sorted(set.intersection(*(set(matrices[p][0]) for p in parts)))
-        variants = {name: (parts, params.rerank_k), f"{name} (no re-ranking)": (parts, None)}
+        variants = {name: (parts, fusion.rerank_k), f"{name} (no re-ranking)": (parts, None)}
         if len(parts) > 1:
-            variants.update({f"{name} without {p}": ([q for q in parts if q != p], params.rerank_k) for p in parts})
+            variants.update({f"{name} without {p}": ([q for q in parts if q != p], fusion.rerank_k) for p in parts})
         for variant, (use, k) in variants.items():
-            D = fused_matrix([_restrict(matrices[p], kept) for p in use], Fusion(tuple(use), k, params.rerank_alpha))
+            D = fused_matrix([_restrict(matrices[p], kept) for p in use], Fusion(tuple(use), k, fusion.rerank_alpha))
             if variant == name:
                 matrices[name] = (kept, D)
             m = retrieval_metrics(D, y[kept]).micro
@@ -137,22 +182,13 @@ def _method_matrix(items, method: str, label: str, params) -> tuple[list[int], n
 
     kept = [i for i, r in enumerate(items) if label in r.results]
     descriptors = [items[i].results[label].descriptor for i in kept]
-    return kept, dissimilarity_matrix(descriptors, _comparison(method), _match_options(method, params))
+    return kept, dissimilarity_matrix(descriptors, params.method(method), _match_options(method, params))
 
 
-def _comparison(method: str) -> str:
-    """How a report method's descriptors compare: its own vector metric, or endpoint matching."""
-    from topomatch.stages.retrieval.ranking import VECTOR_METHODS
-
-    return method if method in VECTOR_METHODS else "srg"  # endpoint descriptors share one comparison
-
-
-def _match_options(method: str, params):
-    """Endpoint matching options of a report method (the params' unmatched cost, else the method's default)."""
-    from topomatch.stages.retrieval.methods import default_match_options
-
-    cost = {} if params.unmatched_cost is None else {"unmatched_cost": params.unmatched_cost}
-    return default_match_options(method, correspondence=params.correspondence, **cost)
+def _match_options(method: str, params: MethodsParams):
+    """Endpoint matching options of a report method: the report's overrides, else the method's own."""
+    return params.method(method).match_options(unmatched_cost=params.unmatched_cost,
+                                               correspondence=params.correspondence)
 
 
 def _restrict(matrix: tuple[list[int], np.ndarray], kept: list[int]) -> np.ndarray:
@@ -165,7 +201,7 @@ def _restrict(matrix: tuple[list[int], np.ndarray], kept: list[int]) -> np.ndarr
 def _top10_grid(items, y, D, kept, where, queries, method):
     import matplotlib.pyplot as plt
 
-    from topomatch.pipeline.render import draw_mesh
+    from topomatch.stages.mesh.render import draw_mesh
 
     fig = plt.figure(figsize=(11 * 1.3, len(queries) * 1.5))
     for row, q in enumerate(queries):
@@ -183,16 +219,8 @@ def _top10_grid(items, y, D, kept, where, queries, method):
     return fig
 
 
-class RetrievalRobustnessParams(Params):
+class RetrievalRobustnessParams(MethodsParams):
     name: str = Field("robustness", pattern=r"^[A-Za-z0-9_.-]+$", description="prefix of the output files")
-    methods: dict[str, str] = Field(description="method name -> stage label holding its descriptor")
-    fusions: dict[str, list[str]] = Field(default_factory=dict, description="fused method -> its methods")
-    rerank_k: int | None = Field(10, ge=1, description="fusions: manifold-ranking neighbours; none = no re-ranking")
-    rerank_alpha: float = Field(0.9, gt=0, lt=1, description="fusions: manifold-ranking diffusion weight")
-    labels: str = Field(description="CSV with relative_path and class columns (path template)")
-    unmatched_cost: float | None = Field(None, ge=0, description="endpoint methods: cost per unmatched endpoint "
-                                                                 "(none: the method's default)")
-    correspondence: str = Field("greedy", pattern="^(greedy|greedy_sequential|optimal)$")
 
 
 @report("retrieval_robustness", params=RetrievalRobustnessParams)
@@ -206,10 +234,11 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
     """
     import matplotlib.pyplot as plt
 
-    from topomatch.stages.retrieval.fusion import Fusion, fused_query
+    from topomatch.stages.retrieval.fusion import fused_query
     from topomatch.stages.retrieval.metrics import retrieval_metrics
     from topomatch.stages.retrieval.ranking import dissimilarities
 
+    fusions = params.all_fusions()
     labels = _labels(experiment, params.labels)
     points = experiment.sweep_points()
     by_point: dict[str, dict[str, object]] = {}
@@ -225,7 +254,6 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
     matrices = {m: _method_matrix(db_items, m, label, params) for m, label in params.methods.items()}
     if any(len(kept) != len(db_items) for kept, _ in matrices.values()):
         raise ConfigError("retrieval_robustness: every clean item needs every method's descriptor")
-    fusions = {name: Fusion(tuple(parts), params.rerank_k, params.rerank_alpha) for name, parts in params.fusions.items()}
     rows = []
     for point in points:
         found = by_point.get(_point_name(point), {})
@@ -237,8 +265,8 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
         for method, label in params.methods.items():
             options = _match_options(method, params)
             database = [db_items[i].results[label].descriptor for i in idx]
-            kind = _comparison(method)
-            single[method] = np.stack([dissimilarities(found[p].results[label].descriptor, database, kind, options)
+            single[method] = np.stack([dissimilarities(found[p].results[label].descriptor, database, params.method(method),
+                                                       options)
                                        for p in paths])
         for name, fusion in fusions.items():
             mats = [matrices[m][1][np.ix_(idx, idx)] for m in fusion.parts]

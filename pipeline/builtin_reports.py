@@ -1,0 +1,89 @@
+"""The engine's own reports, for any kind of item: ``table`` and ``line_plot``.
+
+- ``table``: selected columns of the results table (``columns`` are glob patterns).
+- ``line_plot``: a column against a sweep key or another column, one line per input.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+import json
+from pathlib import Path
+from typing import Any
+
+from pydantic import Field
+
+from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, report
+
+class TableParams(Params):
+    name: str = Field("summary", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the table")
+    columns: list[str] = Field(default_factory=lambda: ["*"], description="glob patterns of results columns to keep")
+    only_ok: bool = Field(False, description="leave failed items out")
+    unique: bool = Field(False, description="drop rows repeated after the column selection")
+
+
+def select_columns(rows: list[dict[str, Any]], patterns: list[str]) -> list[dict[str, Any]]:
+    """Keep the columns matching any pattern, in pattern order."""
+    out = []
+    for row in rows:
+        kept: dict[str, Any] = {}
+        for pattern in patterns:
+            for column, value in row.items():
+                if column not in kept and fnmatch.fnmatchcase(column, pattern):
+                    kept[column] = value
+        out.append(kept)
+    return out
+
+
+@report("table", params=TableParams)
+def table_report(experiment, results, params: TableParams) -> ReportOutput:
+    """Selected columns of the results table."""
+    rows = select_columns([r.row() for r in results if r.ok or not params.only_ok], params.columns)
+    if params.unique:
+        seen: set[str] = set()
+        rows = [r for r in rows if not (json.dumps(r, sort_keys=True, default=str) in seen
+                                        or seen.add(json.dumps(r, sort_keys=True, default=str)))]
+    return ReportOutput(tables={params.name: rows})
+
+
+class LinePlotParams(Params):
+    name: str = Field("plot", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure")
+    x: str = Field(description="sweep key or results column on the x axis")
+    y: list[str] = Field(min_length=1, description="results columns on the y axis (one panel each)")
+    group_by: str = Field("input", description="column that separates the lines")
+    logx: bool = False
+    normalize: bool = Field(False, description="divide each line by its value at the smallest x")
+    title: str = ""
+
+
+@report("line_plot", params=LinePlotParams)
+def line_plot_report(experiment, results, params: LinePlotParams) -> ReportOutput:
+    """A results column against a sweep key or column, one line per input."""
+    import matplotlib.pyplot as plt
+
+    rows = [r.row() for r in results if r.ok]
+    fig, axes = plt.subplots(1, len(params.y), figsize=(4.5 * len(params.y), 3.6), squeeze=False)
+    for ax, y in zip(axes[0], params.y):
+        groups: dict[str, list[tuple[float, float]]] = {}
+        for row in rows:
+            if params.x in row and y in row:
+                group = Path(str(row.get(params.group_by, ""))).name
+                groups.setdefault(group, []).append((float(row[params.x]), float(row[y])))
+        if not groups:
+            raise ConfigError(f"line_plot: no rows have both {params.x!r} and {y!r}")
+        for group, pts in groups.items():
+            pts.sort()
+            if params.normalize and pts[0][1] == 0:
+                raise ConfigError(f"line_plot {params.name}: cannot normalise {y!r} by its value 0 at {params.x}={pts[0][0]}")
+            scale = pts[0][1] if params.normalize else 1.0
+            ax.plot([p[0] for p in pts], [p[1] / scale for p in pts], marker="o", label=group)
+        ax.set_xlabel(params.x)
+        ax.set_ylabel(f"{y} / value at {params.x.split('.')[-1]}={pts[0][0]:g}" if params.normalize else y)
+        if params.logx:
+            ax.set_xscale("symlog", linthresh=1e-4)
+        ax.grid(alpha=0.3)
+    axes[0][-1].legend(fontsize=7, loc="best")
+    if params.title:
+        fig.suptitle(params.title)
+    fig.tight_layout()
+    return ReportOutput(figures={params.name: fig})

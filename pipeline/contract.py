@@ -1,0 +1,119 @@
+"""The contract between the engine and the science: all that ``stages/`` imports from ``pipeline/``.
+
+A stage is a plain function ``func(*consumed_state, params) -> result``; a report is a function
+``func(experiment, results, params) -> ReportOutput``. The :func:`stage` and :func:`report`
+decorators only attach their metadata (:class:`StageSpec`, :class:`ReportSpec`) to the function;
+the engine's registry (:mod:`topomatch.pipeline.registry`) finds them by scanning the modules of
+``topomatch.stages``. Nothing here imports the runner, the cache or the CLI, and nothing here
+knows a domain.
+
+Re-exported for the stages: the error types, :class:`Params` (typed, frozen, strict parameter
+models) and the atomic file writers.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from topomatch.pipeline.errors import ConfigError, InputError, StageError, TopomatchError
+from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text, check_readable_file
+from topomatch.pipeline.params import Params
+
+__all__ = [
+    "ConfigError", "InputError", "StageError", "TopomatchError", "Params", "StageResult", "StageSpec", "stage",
+    "ReportOutput", "ReportSpec", "report", "gallery_layout", "atomic_write_bytes", "atomic_write_text",
+    "check_readable_file",
+]
+
+
+class StageResult:
+    """Mixin for the named result structures (frozen dataclasses) that stages return.
+
+    ``summary()`` gives the scalars that go into the run's tables, keyed by short column
+    names; the runner prefixes them with the stage label.
+    """
+
+    def summary(self) -> dict[str, Any]:
+        return {}
+
+
+def _first_doc_line(func: Callable) -> str:
+    return (func.__doc__ or "").strip().splitlines()[0] if func.__doc__ else ""
+
+
+@dataclass(frozen=True)
+class StageSpec:
+    """One stage: its YAML name, function, params type, version and data flow.
+
+    ``consumes`` names the state entries passed to the function (in order); ``produces`` the
+    attributes of its result that become state entries for the next stage. ``version`` is part
+    of the cache key: bump it when the algorithm's output changes.
+    """
+
+    name: str
+    func: Callable[..., Any]
+    params: type[Params]
+    version: int
+    consumes: tuple[str, ...]
+    produces: tuple[str, ...]
+    doc: str
+
+    def run(self, state_values: dict[str, Any], params: Params) -> Any:
+        """Call the stage on the consumed state values."""
+        return self.func(*[state_values[k] for k in self.consumes], params=params)
+
+
+def stage(name: str, *, params: type[Params], version: int, consumes: tuple[str, ...] = ("mesh",),
+          produces: tuple[str, ...] = ()) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """Mark ``func`` as the stage ``name`` (decorator; attaches ``func.stage_spec``)."""
+
+    def mark(func: Callable[..., Any]) -> Callable[..., Any]:
+        func.stage_spec = StageSpec(name, func, params, version, tuple(consumes), tuple(produces),
+                                    _first_doc_line(func))
+        return func
+
+    return mark
+
+
+@dataclass
+class ReportOutput:
+    """Tables (name -> rows) and figures (name -> matplotlib Figure) of one report, and notes."""
+
+    tables: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
+    figures: dict[str, Any] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class ReportSpec:
+    """One report: its YAML name, function, params type and one-line doc."""
+
+    name: str
+    func: Callable[..., ReportOutput]
+    params: type[Params]
+    doc: str
+
+
+def report(name: str, *, params: type[Params]) -> Callable[[Callable[..., ReportOutput]], Callable[..., ReportOutput]]:
+    """Mark ``func`` as the report ``name`` (decorator; attaches ``func.report_spec``)."""
+
+    def mark(func: Callable[..., ReportOutput]) -> Callable[..., ReportOutput]:
+        func.report_spec = ReportSpec(name, func, params, _first_doc_line(func))
+        return func
+
+    return mark
+
+
+def gallery_layout(results, columns: int) -> tuple[int, int, list[int]]:
+    """(rows, cols, panel index per item result) of a figure grid: inputs x sweep points, or the
+    items wrapped ``columns`` to a row when the run has no sweep."""
+    inputs = list(dict.fromkeys(r.input_path for r in results))
+    points = list(dict.fromkeys(json.dumps(r.sweep, sort_keys=True) for r in results))
+    if len(points) == 1:
+        cols = min(columns, len(results))
+        return -(-len(results) // cols), cols, list(range(len(results)))
+    cells = [inputs.index(r.input_path) * len(points) + points.index(json.dumps(r.sweep, sort_keys=True))
+             for r in results]
+    return len(inputs), len(points), cells

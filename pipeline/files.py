@@ -1,0 +1,66 @@
+"""Files the engine and the domains write or read: atomic writes and readable-input checks.
+
+Every output (cache entries, tables, figures, exported skeletons, run pages) is written to a
+temporary file in the destination folder and moved into place with ``os.replace``: a reader
+sees the old file or the whole new one, never a truncated one. The files get the usual
+permissions of the process's umask (group- and world-readable under the common 022), not the
+0600 of a temporary file.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+from topomatch.pipeline.errors import InputError
+
+# The process's umask (read once: os.umask can only be read by setting it).
+_UMASK = os.umask(0o022)
+os.umask(_UMASK)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` so that readers see the old file or the whole new one.
+
+    Raises
+    ------
+    OSError
+        The folder cannot be created or written (e.g. ``path``'s parent is a file).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_UMASK)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """:func:`atomic_write_bytes` of ``text`` encoded as UTF-8."""
+    atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def check_readable_file(path: str | Path) -> Path:
+    """``path`` as a Path, after checking that it is an existing, readable regular file.
+
+    Raises
+    ------
+    InputError
+        Not found, not a regular file, or not readable; the message names the file.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "file not found")
+    if not path.is_file():
+        raise InputError(path, "not a regular file")
+    if not os.access(path, os.R_OK):
+        raise InputError(path, "file is not readable (permission denied)")
+    return path

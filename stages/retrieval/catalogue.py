@@ -1,0 +1,130 @@
+"""The retrieval methods: one record per method, the only place where a method is defined.
+
+A :class:`Method` says how a mesh becomes a descriptor (its stage chain, in config form), how
+two descriptors compare (``kind`` and ``distance``) and with which default options (the cost of
+an unmatched endpoint), or, for a fusion, which methods it combines and how it re-ranks. The CLI
+(choices, help, defaults), the Python API, the shape index, ranking, evaluation, the reports and
+the benchmarks all read :data:`METHODS`; adding a descriptor is one module (params, descriptor,
+distance, stage) plus one record here (docs/engine.md shows an example).
+
+Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
+
+- ``rgpd``, ``srg``: the thesis's skeletons (ch. 3: mixture distance; ch. 4: Fiedler vector),
+  endpoint features (a, dv, dc) matched by the greedy correspondence;
+- ``agd``: intrinsic skeleton (average geodesic distance) with heat-kernel endpoint signatures;
+- ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum;
+- ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
+- ``topomatch``: the fusion of agd, hks, shapedna, d2 and sh, re-ranked by manifold ranking.
+
+The intrinsic methods (agd, hks) work on a copy decimated to 6,000 faces and share its 60
+leading eigenpairs through the stage cache (:data:`SPECTRAL_CHAIN`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable, Literal
+
+import numpy as np
+
+from topomatch.pipeline.contract import ConfigError
+from topomatch.stages.reeb.recipe import skeleton_chain
+from topomatch.stages.retrieval import hks
+from topomatch.stages.retrieval.baselines import d2, shapedna, spherical_harmonics
+from topomatch.stages.retrieval.descriptor import MatchOptions
+from topomatch.stages.retrieval.fusion import Fusion
+
+#: Cleaned mesh: the prefix of the vector baselines.
+CLEAN_CHAIN: tuple[Any, ...] = ("load", {"clean": {"components": "largest"}})
+
+#: Cleaned, decimated (6,000 faces) mesh and its 60 leading eigenpairs: the intrinsic methods' prefix.
+SPECTRAL_CHAIN: tuple[Any, ...] = CLEAN_CHAIN + (
+    {"decimate": {"target_faces": 6000}},
+    {"clean": {"components": "largest"}},
+    {"spectrum": {"k": 60}},
+)
+
+
+@dataclass(frozen=True)
+class Method:
+    """One retrieval method.
+
+    Attributes
+    ----------
+    name : str
+        The name users type (``--method``) and the index stores.
+    title : str
+        One line for help texts and tables.
+    kind : {'endpoints', 'vector', 'fusion'}
+        Endpoint features compared by correspondence, a fixed-length vector compared by
+        ``distance``, or a fusion of other methods.
+    chain : tuple
+        Stage chain (config form) from a mesh file to the ``descriptor`` state entry (not for fusions).
+    distance : callable, optional
+        Vector methods: ``distance(X (n, d), Y (m, d)) -> (n, m)``.
+    unmatched_cost : float
+        Endpoint methods: default cost per endpoint left without a partner.
+    fusion : Fusion, optional
+        Fusions: the part methods and the re-ranking.
+    """
+
+    name: str
+    title: str
+    kind: Literal["endpoints", "vector", "fusion"]
+    chain: tuple[Any, ...] = ()
+    distance: Callable[..., np.ndarray] | None = None
+    unmatched_cost: float = 0.0
+    fusion: Fusion | None = None
+
+    @property
+    def parts(self) -> tuple[str, ...]:
+        """The methods whose descriptors this one needs: a fusion's parts, or itself."""
+        return self.fusion.parts if self.fusion is not None else (self.name,)
+
+    def match_options(self, **overrides: Any) -> MatchOptions:
+        """The endpoint matching options of this method (its unmatched cost), with ``overrides``
+        (None values are ignored); vector methods ignore them."""
+        given = {k: v for k, v in overrides.items() if v is not None}
+        return MatchOptions.model_validate({"unmatched_cost": self.unmatched_cost, **given})
+
+
+METHODS: dict[str, Method] = {m.name: m for m in (
+    Method("rgpd", "mixture-distance skeleton endpoints (thesis ch. 3)", "endpoints",
+           tuple(skeleton_chain("mixture")) + ("endpoint_descriptor",), unmatched_cost=0.2),
+    Method("srg", "Fiedler-vector skeleton endpoints (thesis ch. 4)", "endpoints",
+           tuple(skeleton_chain("fiedler")) + ("endpoint_descriptor",), unmatched_cost=0.2),
+    Method("agd", "intrinsic skeleton (average geodesic distance) with heat-kernel endpoint signatures",
+           "endpoints", SPECTRAL_CHAIN + ({"morse": {"function": "agd"}}, "level_sets", "reeb_graph", "prune",
+                                          "endpoint_hks_descriptor"), unmatched_cost=0.5),
+    Method("hks", "heat-kernel-signature histograms", "vector", SPECTRAL_CHAIN + ("hks",),
+           distance=hks.distance_matrix),
+    Method("shapedna", "ShapeDNA, the normalised Laplace-Beltrami spectrum (Reuter 2006)", "vector",
+           CLEAN_CHAIN + ("shapedna",), distance=shapedna.distance_matrix),
+    Method("d2", "D2 shape distribution (Osada 2002)", "vector", CLEAN_CHAIN + ("d2",),
+           distance=d2.distance_matrix),
+    Method("sh", "rotation-invariant spherical harmonics (Kazhdan 2003)", "vector",
+           CLEAN_CHAIN + ("spherical_harmonics",), distance=spherical_harmonics.distance_matrix),
+    Method("topomatch", "fusion of agd, hks, shapedna, d2 and sh, re-ranked by manifold ranking", "fusion",
+           fusion=Fusion(("agd", "hks", "shapedna", "d2", "sh"), rerank_k=10, rerank_alpha=0.9)),
+)}
+
+#: Default of the commands on a collection (index, query, evaluate): the best method on SHREC'07
+#: Watertight (docs/retrieval.md).
+DEFAULT_METHOD = "topomatch"
+
+#: Default of ``match`` (two meshes, no collection): the best method that compares two shapes on
+#: their own (a fusion needs a collection's scales).
+DEFAULT_PAIR_METHOD = "hks"
+
+
+def get_method(name: str) -> Method:
+    """The record of ``name``; a :class:`ConfigError` listing the methods otherwise."""
+    try:
+        return METHODS[name]
+    except KeyError:
+        raise ConfigError(f"unknown retrieval method {name!r}; methods: {', '.join(METHODS)}") from None
+
+
+def help_text() -> str:
+    """One line per method, for ``--help``."""
+    return "; ".join(f"{m.name}: {m.title}" for m in METHODS.values())

@@ -1,0 +1,85 @@
+"""``topomatch register`` as a user runs it: JSON, text, output files, flags and bad inputs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image as PILImage
+
+from topomatch.cli import main
+from topomatch.pipeline.config import load_experiment
+from topomatch.pipeline.runner import run_experiment
+from tests_paths import REPO_ROOT
+
+CONFIGS = REPO_ROOT / "configs" / "registration"
+
+
+def register_cli(capsys, *args):
+    code = main(["register", *map(str, args)])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_json_recovers_the_itk_translation(capsys, itk_dir):
+    code, out, _ = register_cli(capsys, itk_dir / "BrainProtonDensitySliceBorder20.png",
+                                itk_dir / "BrainProtonDensitySliceShifted13x17y.png", "--json")
+    assert code == 0
+    res = json.loads(out)
+    assert res["tx"] == pytest.approx(13, abs=0.1) and res["ty"] == pytest.approx(17, abs=0.1)
+    assert abs(res["angle"]) < 0.1 and res["ok"] and res["metric"] == "jt"
+    assert {"objective", "iterations", "seconds", "center", "convention"} <= set(res)
+
+
+def test_cli_text_and_outputs(capsys, itk_dir, tmp_path):
+    code, out, _ = register_cli(capsys, itk_dir / "BrainT1Slice.png", itk_dir / "BrainProtonDensitySlice.png",
+                                "--metric", "mi", "--out", tmp_path / "out")
+    assert code == 0
+    for key in ("tx:", "ty:", "angle:", "objective:", "iterations:", "seconds:"):
+        assert key in out
+    resampled = np.asarray(PILImage.open(tmp_path / "out" / "moving_resampled.png"))
+    assert resampled.shape == (217, 181) and resampled.dtype == np.uint8
+    assert np.asarray(PILImage.open(tmp_path / "out" / "moving_resampled.tif")).dtype == np.float32
+    assert (tmp_path / "out" / "overlay.png").stat().st_size > 20_000
+    saved = json.loads((tmp_path / "out" / "registration.json").read_text())
+    assert len(saved["history"]["theta"]) == saved["iterations"]
+
+
+def test_cli_flags_a_misalignment_outside_the_capture_range(capsys, pd_slice, tmp_path):
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.transform import RigidTransform
+
+    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 0, 0, 150))
+    path = tmp_path / "upside_down.png"
+    PILImage.fromarray(np.clip(moving.data, 0, 255).astype(np.uint8)).save(path)
+    PILImage.fromarray(pd_slice.data.astype(np.uint8)).save(tmp_path / "fixed.png")
+    code, out, err = register_cli(capsys, tmp_path / "fixed.png", path, "--json")
+    assert code == 1
+    assert json.loads(out)["ok"] is False
+    assert "registration flagged" in err and "capture range" in err
+
+
+def test_cli_bad_inputs(capsys, itk_dir, tmp_path):
+    png = itk_dir / "BrainT1Slice.png"
+    code, _, err = register_cli(capsys, png, tmp_path / "missing.png")
+    assert code == 1 and "missing.png: file not found" in err
+    code, _, err = register_cli(capsys, png, itk_dir / "KmeansTest_T1UCharRaw.nii.gz")
+    assert code == 1 and "KmeansTest_T1UCharRaw.nii.gz" in err and "different dimensionality" in err
+    code, out, _ = register_cli(capsys, itk_dir / "KmeansTest_T1UCharRaw.nii.gz", itk_dir / "KmeansTest_T1UCharRaw.nii.gz",
+                                "--fixed-slice", "30", "--moving-slice", "31", "--json")
+    assert code == 0 and json.loads(out)["ok"]
+    nan = np.full((40, 40), 5.0, np.float32)
+    nan[10:20, 10:20] = 50
+    nan[0, 0] = np.nan
+    PILImage.fromarray(nan).save(tmp_path / "nan.tif")
+    code, _, err = register_cli(capsys, png, tmp_path / "nan.tif")
+    assert code == 1 and "nan.tif: 1 of 1600 pixels are NaN" in err
+    PILImage.fromarray(np.zeros((40, 40), np.uint8)).save(tmp_path / "black.png")
+    code, _, err = register_cli(capsys, tmp_path / "black.png", png)
+    assert code == 1 and "black.png: image is constant" in err
+    (tmp_path / "broken.png").write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00" * 20)
+    code, _, err = register_cli(capsys, png, tmp_path / "broken.png")
+    assert code == 1 and "broken.png: cannot read image" in err
+    assert "Traceback" not in err

@@ -1,0 +1,54 @@
+"""The ``topomatch`` command line: the engine's commands and each domain's.
+
+``run``, ``validate``, ``stages``, ``configs`` (:mod:`.engine`); ``skeleton`` (:mod:`.skeleton`);
+``match``, ``index``, ``query``, ``evaluate`` (:mod:`.retrieval`); ``register`` (:mod:`.registration`).
+Each command is a thin layer over the Python API (:mod:`topomatch`), with its options generated
+from the params models (:mod:`topomatch.pipeline.cli_options`). Errors print one short message
+naming the file and the problem and exit non-zero (2 for a bad config or usage, 1 for bad input
+data or failed items); ``--debug`` shows the traceback instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from topomatch import __version__
+from topomatch.cli import engine, registration, retrieval, skeleton
+from topomatch.pipeline.errors import TopomatchError
+
+#: The command modules, in --help order; each has ``add_parsers(subparsers)``.
+COMMANDS = (engine, skeleton, retrieval, registration)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="topomatch",
+        description="Topological shape skeletons, shape matching and retrieval, and entropic image "
+                    "registration, run as reproducible YAML experiments.",
+    )
+    parser.add_argument("--version", action="version", version=f"topomatch {__version__}")
+    parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for module in COMMANDS:
+        module.add_parsers(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.handler(args)
+    except TopomatchError as exc:
+        if args.debug:
+            raise
+        print(f"topomatch: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("topomatch: interrupted; finished stages are cached, run again to resume", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

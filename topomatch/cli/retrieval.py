@@ -1,0 +1,153 @@
+"""``topomatch match | index | query | evaluate``: shape matching and retrieval from the command line.
+
+Thin layers over :mod:`topomatch.retrieval`. ``--method`` lists the catalogue's methods
+(:mod:`topomatch.stages.retrieval.catalogue`) and defaults to its best: the fused method for the
+commands on a collection, the best single method for ``match``. The matching options come from
+:class:`~topomatch.stages.retrieval.descriptor.MatchOptions`; left out, each method's own apply.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from topomatch.pipeline.cli_options import Option, add_options, given_options
+
+
+def _models() -> dict:
+    from topomatch.pipeline.config import ExecutorConfig
+    from topomatch.stages.retrieval.descriptor import MatchOptions
+
+    return {"match": MatchOptions, "executor": ExecutorConfig}
+
+
+def _match_options() -> list[Option]:
+    from topomatch.stages.retrieval.catalogue import METHODS
+
+    costs = ", ".join(f"{m.name} {m.unmatched_cost:g}" for m in METHODS.values() if m.kind == "endpoints")
+    return [Option("match.correspondence", default_help="greedy"),
+            Option("match.dissimilarity", default_help="matched"),
+            Option("match.unmatched_cost", default_help=f"the method's own: {costs}"),
+            Option("match.endpoint_window", default_help="none, compare all")]
+
+
+def _method_arg(p: argparse.ArgumentParser, default: str) -> None:
+    from topomatch.stages.retrieval.catalogue import METHODS, help_text
+
+    choices = list(METHODS)
+    p.add_argument("--method", default=default, choices=choices,
+                   help=f"retrieval method (default {default}). {help_text()}")
+
+
+def _with_match_options(p: argparse.ArgumentParser) -> None:
+    add_options(p, _models(), _match_options())
+
+
+def _given(args: argparse.Namespace) -> dict:
+    return given_options(args, _models(), _match_options()).get("match", {})
+
+
+def add_parsers(sub) -> None:
+    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, DEFAULT_PAIR_METHOD
+
+    p = sub.add_parser("match", help="dissimilarity of two meshes", description="Dissimilarity of two meshes "
+                       "by one retrieval method; for a skeleton method also the endpoint correspondence.")
+    p.add_argument("a", help="first mesh")
+    p.add_argument("b", help="second mesh")
+    _method_arg(p, DEFAULT_PAIR_METHOD)
+    _with_match_options(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(handler=cmd_match)
+
+    p = sub.add_parser("index", help="index a collection of meshes", description="Compute descriptors of meshes "
+                       "and store them in a SQLite index; unchanged meshes are skipped.")
+    p.add_argument("paths", nargs="+", help="mesh files or folders (searched recursively)")
+    p.add_argument("--db", required=True, help="index file (SQLite), created if missing")
+    _method_arg(p, DEFAULT_METHOD)
+    p.add_argument("--labels", help="CSV with columns relative_path (or path) and class (or label), paths "
+                                    "relative to the CSV's folder")
+    add_options(p, _models(), [Option("executor.workers", default_help="all cores"),
+                               Option("executor.kind", flag="--executor")])
+    p.add_argument("--retry-failed", action="store_true", help="recompute meshes recorded as failed")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.set_defaults(handler=cmd_index)
+
+    p = sub.add_parser("query", help="closest indexed shapes to a mesh", description="Rank the indexed shapes "
+                       "by dissimilarity to a query mesh.")
+    p.add_argument("mesh", help="query mesh")
+    p.add_argument("--db", required=True, help="index file")
+    p.add_argument("-k", type=int, default=10, help="results to show (default 10)")
+    _method_arg(p, DEFAULT_METHOD)
+    _with_match_options(p)
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=cmd_query)
+
+    p = sub.add_parser("evaluate", help="retrieval metrics of a labelled index", description="Full dissimilarity "
+                       "matrix of the labelled shapes of an index, PSB metrics (NN, FT, ST, E, DCG, mAP).")
+    p.add_argument("--db", required=True, help="index file")
+    _method_arg(p, DEFAULT_METHOD)
+    _with_match_options(p)
+    p.add_argument("--out", help="where to write the matrix (.npz; default next to the index)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(handler=cmd_evaluate)
+
+
+def cmd_match(args: argparse.Namespace) -> int:
+    from topomatch.retrieval import match
+
+    result = match(args.a, args.b, method=args.method, options=_given(args))
+    out = result.to_dict()
+    if args.json:
+        print(json.dumps(out))
+    else:
+        print(f"dissimilarity ({args.method}): {result.dissimilarity:.6g}")
+        if result.correspondence is not None:
+            print(f"endpoints: {result.endpoints_a} vs {result.endpoints_b}")
+            for pair in result.correspondence:
+                print(f"  endpoint {pair['a']:>2} <-> {pair['b']:>2}   Phi = {pair['cost']:.4f}")
+    return 0
+
+
+def cmd_index(args: argparse.Namespace) -> int:
+    from topomatch.retrieval import index
+
+    executor = given_options(args, _models(), ["executor.workers", Option("executor.kind", flag="--executor")])
+    settings = executor.get("executor", {})
+    report = index(args.paths, args.db, method=args.method, labels=args.labels, workers=settings.get("workers"),
+                   executor=settings.get("kind"), retry_failed=args.retry_failed,
+                   progress=not args.no_progress)
+    for part in report.parts:
+        print(f"{report.db}: {part.done} indexed, {part.failed} failed, {report.n_files - part.todo} unchanged "
+              f"(skipped) [{part.method}, {part.seconds:.1f} s of worker time]")
+    print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
+    for part in report.parts:
+        for reason in part.failures:
+            print(f"  failed ({part.method}): {reason}", file=sys.stderr)
+    return 0
+
+
+def cmd_query(args: argparse.Namespace) -> int:
+    from topomatch.retrieval import open_index
+
+    result = open_index(args.db).query(args.mesh, k=args.k, method=args.method, options=_given(args))
+    if args.json:
+        print(json.dumps(result.to_dict()))
+    else:
+        endpoints = result.endpoints if result.endpoints is not None else "-"
+        print(f"query {args.mesh} ({args.method}, {endpoints} endpoints) against {result.indexed} shapes:")
+        for r in result.results:
+            print(f"  {r['rank']:>3}. {r['dissimilarity']:.5f}  {r['label'] or '':<12} {r['path']}")
+    return 0
+
+
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from topomatch.retrieval import open_index
+
+    ev = open_index(args.db).evaluate(method=args.method, options=_given(args), out=args.out)
+    if args.json:
+        print(json.dumps(ev.to_dict()))
+    else:
+        print(ev.metrics.table(args.method))
+        print(f"{ev.n} shapes; matrix ({ev.matrix_seconds:.2f} s) written to {ev.matrix}")
+    return 0

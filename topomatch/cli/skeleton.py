@@ -1,0 +1,51 @@
+"""``topomatch skeleton MESH``: one mesh -> its skeleton, without a config file.
+
+Options come from the stages' params (:data:`topomatch.skeletons.SKELETON_OPTIONS`); the summary or
+``--json`` object is :class:`topomatch.skeletons.Skeleton`'s fields; ``--out`` writes the skeleton
+as GraphML, JSON and an OBJ polyline, the unpruned Reeb graph as GraphML, and a figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+from topomatch.pipeline.cli_options import add_options, given_options
+
+
+def _models() -> dict:
+    """The params models of the stages whose options the command exposes (by stage name)."""
+    from topomatch.stages.morse.stage import MorseParams
+    from topomatch.stages.reeb.level_sets import LevelSetParams
+    from topomatch.stages.reeb.prune import PruneParams
+    from topomatch.stages.reeb.reeb_graph import ReebParams
+
+    return {"morse": MorseParams, "level_sets": LevelSetParams, "reeb_graph": ReebParams, "prune": PruneParams}
+
+
+def add_parsers(sub) -> None:
+    from topomatch.skeletons import SKELETON_OPTIONS
+
+    p = sub.add_parser("skeleton", help="compute the Reeb-graph skeleton of one mesh",
+                       description="Compute the Reeb-graph skeleton of one mesh (load, clean to the largest "
+                                   "component, Morse function, level sets, Reeb graph, prune) and print its counts.")
+    p.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL, optionally .gz)")
+    add_options(p, _models(), SKELETON_OPTIONS)
+    p.add_argument("--out", metavar="DIR", help="write skeleton.graphml/.json/.obj, reeb.graphml and skeleton.png")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+    p.set_defaults(handler=cmd_skeleton)
+
+
+def cmd_skeleton(args: argparse.Namespace) -> int:
+    from topomatch.skeletons import SKELETON_OPTIONS, skeleton_with, write_skeleton_files
+
+    result = skeleton_with(args.mesh, given_options(args, _models(), SKELETON_OPTIONS))
+    summary = result.to_dict()
+    if args.out:
+        summary["files"] = write_skeleton_files(result, args.out)
+    if args.json:
+        print(json.dumps(summary))
+    else:
+        for key, value in summary.items():
+            print(f"{key:>17}: {value}")
+    return 0

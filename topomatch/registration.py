@@ -1,0 +1,204 @@
+"""Rigid registration of two images: the Python API behind ``topomatch register``.
+
+:func:`register` runs ``load_pair -> register`` (or ``register`` alone on in-memory images)
+through the engine's runner, exactly as ``topomatch register`` and a config do, with the
+``register`` stage's defaults for everything not given. The transform is in ITK's convention:
+``T(x) = R(angle)(x - c) + c + t``, x = (column, row) in pixels, c the fixed image's centre,
+``moving(T(x)) ~ fixed(x)``. :func:`write_registration_files` writes what ``--out`` writes.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from topomatch.pipeline.config import chain_with
+from topomatch.pipeline.errors import InputError, StageError
+from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text
+from topomatch.pipeline.item import run_stages
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.io import read_image as _read_image
+from topomatch.stages.registration.register import Registration, RegisterParams
+
+#: The options of a registration (stage.param...), shared by :func:`register` and ``topomatch register``.
+REGISTER_OPTIONS = ("register.metric", "register.alpha", "register.weights", "register.optimizer", "register.seed",
+                    "load_pair.fixed_slice", "load_pair.moving_slice")
+
+CONVENTION = "ITK: T(x) = R(angle)(x - c) + c + t, x = (col, row) px, moving(T(x)) ~ fixed(x)"
+
+
+@dataclass(frozen=True, eq=False)
+class RegistrationOutcome:
+    """The result of one registration, with the fields ``topomatch register --json`` prints.
+
+    JSON fields (:meth:`to_dict`): ``fixed``, ``moving`` (names), ``convention``, ``tx``, ``ty`` (pixels),
+    ``angle`` (degrees), ``center`` (c, pixels), ``metric``, ``alpha``, ``method``, ``objective`` (the
+    measure at the result), ``iterations``, ``evaluations``, ``seconds``, ``ok`` (the self-check
+    passed) and ``reason`` (why not). Besides them: ``registration`` (the full
+    :class:`~topomatch.stages.registration.register.Registration`, with the optimiser's history),
+    ``fixed_image`` and ``moving_image``.
+    """
+
+    fixed: str
+    moving: str
+    convention: str
+    tx: float
+    ty: float
+    angle: float
+    center: list[float]
+    metric: str
+    alpha: float
+    method: str
+    objective: float
+    iterations: int
+    evaluations: int
+    seconds: float
+    ok: bool
+    reason: str
+    registration: Registration = field(repr=False)
+    fixed_image: Image = field(repr=False)
+    moving_image: Image = field(repr=False)
+
+    JSON_FIELDS = ("fixed", "moving", "convention", "tx", "ty", "angle", "center", "metric", "alpha", "method",
+                   "objective", "iterations", "evaluations", "seconds", "ok", "reason")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON fields as a plain dict."""
+        return {k: getattr(self, k) for k in self.JSON_FIELDS}
+
+
+def read_image(path: str | Path, *, slice: int | None = None) -> Image:
+    """A 2D image (PNG, TIFF, NIfTI, DICOM, MetaImage, NRRD), or one slice of a volume (along its first axis).
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable or unusable file (names it).
+    """
+    return _read_image(path, slice_index=slice)
+
+
+def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: str | None = None,
+             alpha: float | None = None, weights: str | None = None, optimizer: str | None = None,
+             seed: int | None = None, fixed_slice: int | None = None,
+             moving_slice: int | None = None) -> RegistrationOutcome:
+    """Register ``moving`` to ``fixed`` (rigid, 2D): images or image files.
+
+    Parameters
+    ----------
+    fixed, moving : Image or path
+    metric : {'jt', 'jr', 'mi', 'tmi'}, optional
+        Jensen-Tsallis (the default of the ``register`` stage, thesis ch. 2), Jensen-Renyi, mutual
+        information, Tsallis MI.
+    alpha : float, optional
+        Entropy order of jt, jr, tmi (default 2).
+    weights : {'histogram', 'uniform'}, optional
+        Jensen weights (default: the reference histogram).
+    optimizer : {'spsa', 'powell'}, optional
+        Default SPSA.
+    seed : int, optional
+        Seed of SPSA and of the sample subsets (the same seed gives the same result).
+    fixed_slice, moving_slice : int, optional
+        Files only: the slice of a 3D volume.
+
+    Returns
+    -------
+    RegistrationOutcome
+        ``ok`` is False, with a ``reason``, when the self-check flags the result.
+
+    Raises
+    ------
+    InputError
+        An unreadable or unusable image (names it).
+    ConfigError
+        An option out of range.
+    StageError
+        The registration could not run.
+    """
+    given = {"register.metric": metric, "register.alpha": alpha, "register.weights": weights,
+             "register.optimizer": optimizer, "register.seed": seed, "load_pair.fixed_slice": fixed_slice,
+             "load_pair.moving_slice": moving_slice}
+    overrides: dict[str, dict[str, Any]] = {}
+    for path, value in given.items():
+        if value is not None:
+            stage_name, param = path.split(".", 1)
+            overrides.setdefault(stage_name, {})[param] = value
+    return register_with(fixed, moving, overrides)
+
+
+def register_with(fixed: Image | str | Path, moving: Image | str | Path,
+                  overrides: dict[str, dict[str, Any]]) -> RegistrationOutcome:
+    """:func:`register` with the options as ``{stage: {param: value}}`` (what the CLI collects)."""
+    in_memory = isinstance(fixed, Image) and isinstance(moving, Image)
+    if in_memory:
+        if "load_pair" in overrides:
+            raise InputError(None, "fixed_slice / moving_slice apply to image files, not to images in memory")
+        chain = chain_with(["register"], overrides)
+        result = run_stages(chain, values={"fixed": fixed, "moving": moving}, label=f"{fixed.name}|{moving.name}")
+        names = (fixed.name, moving.name)
+    else:
+        if isinstance(fixed, Image) or isinstance(moving, Image):
+            raise InputError(None, "give both images as files or both as Image objects")
+        chain = chain_with(["load_pair", "register"], overrides)
+        result = run_stages(chain, paths={"fixed_path": Path(fixed), "moving_path": Path(moving)},
+                            label=f"{fixed}|{moving}")
+        names = (str(fixed), str(moving))
+    if not result.ok:
+        if result.error_stage == "load_pair":
+            raise InputError(None, result.error or "cannot read the images")
+        raise StageError(result.error or "registration failed")
+    params = RegisterParams.model_validate(overrides.get("register", {}))
+    reg = result.final("registration")
+    t = reg.transform
+    return RegistrationOutcome(
+        fixed=names[0], moving=names[1], convention=CONVENTION,
+        tx=round(t.tx, 6), ty=round(t.ty, 6), angle=round(t.angle, 6), center=[round(c, 3) for c in t.center],
+        metric=params.metric, alpha=params.alpha, method=reg.method, objective=reg.value,
+        iterations=reg.iterations, evaluations=reg.evaluations, seconds=round(reg.seconds, 4), ok=reg.ok,
+        reason=reg.reason, registration=reg, fixed_image=result.final("fixed") if not in_memory else fixed,
+        moving_image=result.final("moving") if not in_memory else moving)
+
+
+def _to_uint8(data: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    lo, hi = float(reference.min()), float(reference.max())
+    if lo >= 0 and hi <= 255 and np.allclose(reference, np.round(reference)):
+        return np.clip(np.round(data), 0, 255).astype(np.uint8)
+    return np.clip(np.round((data - lo) / (hi - lo) * 255), 0, 255).astype(np.uint8)
+
+
+def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> list[str]:
+    """The moving image resampled onto the fixed grid (``moving_resampled.png`` 8-bit and ``.tif``
+    float32), ``overlay.png`` and ``registration.json`` (the JSON fields and the optimiser's
+    history) in ``out``; returns their paths."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from PIL import Image as PILImage
+
+    from topomatch.stages.registration.interpolation import resample
+    from topomatch.stages.registration.reports import overlay_figure
+
+    out = Path(out)
+    fixed, moving, reg = outcome.fixed_image, outcome.moving_image, outcome.registration
+    resampled = resample(moving, reg.transform, fixed.shape)
+    paths = [out / "moving_resampled.png", out / "moving_resampled.tif", out / "overlay.png", out / "registration.json"]
+    buf = io.BytesIO()
+    PILImage.fromarray(_to_uint8(resampled, moving.data)).save(buf, format="PNG")
+    atomic_write_bytes(paths[0], buf.getvalue())
+    buf = io.BytesIO()
+    PILImage.fromarray(resampled.astype(np.float32)).save(buf, format="TIFF")
+    atomic_write_bytes(paths[1], buf.getvalue())
+    fig = overlay_figure(fixed, moving, reg, title=f"{Path(outcome.fixed).name} <- {Path(outcome.moving).name}")
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(paths[2], buf.getvalue())
+    history = {k: np.asarray(v).tolist() for k, v in reg.history.items()}
+    atomic_write_text(paths[3], json.dumps({**outcome.to_dict(), "history": history}, default=str))
+    return [str(p) for p in paths]

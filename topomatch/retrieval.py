@@ -1,0 +1,392 @@
+"""Shape matching and retrieval: the Python API behind ``topomatch match | index | query | evaluate``.
+
+Every method is a record of :mod:`topomatch.stages.retrieval.catalogue`; its descriptor is made by
+its stage chain through the engine's runner (and, for an index, its executors and stage cache).
+
+- :func:`match`: the dissimilarity of two meshes (and the endpoint correspondence for an endpoint method);
+- :func:`index`: descriptors of a collection into a SQLite shape index (:mod:`topomatch.shape_index`):
+  unchanged meshes are skipped, an interrupted index resumes, a bad mesh is recorded as failed;
+- :func:`open_index`: a :class:`Collection` to :meth:`~Collection.query` (ranked closest shapes) and
+  :meth:`~Collection.evaluate` (PSB metrics of the labelled shapes).
+
+A fused method (``topomatch``) indexes each of its parts and ranks by their fused, re-ranked
+dissimilarities; it needs a collection, so :func:`match` takes a single method.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from topomatch.pipeline.config import Experiment, build_experiment
+from topomatch.pipeline.errors import ConfigError, InputError, StageError
+from topomatch.pipeline.item import ItemResult, run_item
+from topomatch.shape_index import Row, ShapeIndex
+from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, DEFAULT_PAIR_METHOD, Method, get_method
+from topomatch.stages.retrieval.descriptor import Descriptor, MatchOptions
+
+#: Suffixes of the mesh files an index takes from a folder (optionally .gz).
+MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
+
+#: The matching options (MatchOptions fields) that match, query and evaluate take.
+MATCH_OPTIONS = ("match.correspondence", "match.dissimilarity", "match.unmatched_cost", "match.endpoint_window")
+
+
+# --------------------------------------------------------------------------- descriptors
+
+
+def method_experiment(method: str, paths: list[Path], *, workers: int | None = 1,
+                      executor: str | None = None) -> Experiment:
+    """The experiment that computes ``method``'s descriptor for each mesh path (``workers`` None: all
+    cores; ``executor`` None: the config default, local processes)."""
+    m = get_method(method)
+    if m.kind == "fusion":
+        raise ConfigError(f"{method} is a fusion: its parts {', '.join(m.parts)} have the descriptors")
+    return build_experiment({
+        "name": f"index-{method}",
+        "inputs": {"meshes": [str(p) for p in paths] or ["(no input)"]},
+        "stages": list(m.chain),
+        "executor": {"workers": workers, **({"kind": executor} if executor else {})},
+    }, resolve_inputs=bool(paths))
+
+
+def params_of(experiment: Experiment) -> tuple[dict, str]:
+    """A method's resolved stage chain and its hash (part of the index key)."""
+    resolved = experiment.resolved()
+    params = {"stages": resolved["stages"], "stage_versions": resolved["stage_versions"]}
+    return params, hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def compute_descriptor(path: str | Path, method: str, cache: str | None = None) -> tuple[Descriptor, ItemResult]:
+    """Descriptor of one mesh file (through the stage cache ``cache``, if any).
+
+    Raises
+    ------
+    InputError
+        The file does not exist.
+    StageError
+        A stage failed (the message names the mesh and the reason).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "file not found")
+    (item,) = method_experiment(method, [path.resolve()]).items()
+    result = run_item(item, cache)
+    if not result.ok:
+        raise StageError(result.error or f"{path}: failed")
+    return result.final("descriptor"), result
+
+
+def _options(method: Method, options: dict[str, Any] | None) -> MatchOptions:
+    return method.match_options(**(options or {}))
+
+
+# --------------------------------------------------------------------------- match
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """The dissimilarity of two meshes, with the fields ``topomatch match --json`` prints.
+
+    ``correspondence`` (endpoint methods only): one entry per matched endpoint pair, ``a`` and ``b``
+    (endpoint indices), ``cost`` (Phi) and both endpoints' features; ``endpoints_a``/``endpoints_b``
+    the endpoint counts (None for vector methods).
+    """
+
+    a: str
+    b: str
+    method: str
+    dissimilarity: float
+    endpoints_a: int | None = None
+    endpoints_b: int | None = None
+    correspondence: list[dict[str, Any]] | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+
+def match(a: str | Path, b: str | Path, *, method: str = DEFAULT_PAIR_METHOD,
+          options: dict[str, Any] | None = None) -> MatchResult:
+    """Dissimilarity of two mesh files by ``method`` (default: the catalogue's pair default).
+
+    ``options``: endpoint matching options (``correspondence``, ``dissimilarity``,
+    ``unmatched_cost``, ``endpoint_window``; each defaults to the method's own).
+    """
+    from topomatch.stages.matching.dissimilarity import match_features
+    from topomatch.stages.retrieval.ranking import dissimilarities
+
+    m = get_method(method)
+    if m.kind == "fusion":
+        raise ConfigError(f"match: {method} is a fused method whose scales and re-ranking come from a collection; "
+                          f"index the meshes and query them, or match with one of its parts ({', '.join(m.parts)})")
+    da, _ = compute_descriptor(a, method)
+    db, _ = compute_descriptor(b, method)
+    if m.kind != "endpoints":
+        return MatchResult(str(a), str(b), method, float(dissimilarities(da, [db], m)[0]))
+    o = _options(m, options)
+    r = match_features(da.data, db.data, correspondence=o.correspondence, dissimilarity=o.dissimilarity,
+                       unmatched_cost=o.unmatched_cost)
+    pairs = [{"a": int(i), "b": int(j), "cost": float(c), "features_a": da.data[i].tolist(),
+              "features_b": db.data[j].tolist()} for i, j, c in zip(r.rows, r.cols, r.costs)]
+    return MatchResult(str(a), str(b), method, float(r.dissimilarity), int(len(da.data)), int(len(db.data)), pairs)
+
+
+# --------------------------------------------------------------------------- index
+
+
+def mesh_files(paths: list[str | Path]) -> list[Path]:
+    """Mesh files from files and folders (recursive), sorted, de-duplicated, resolved."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            out += [f for f in sorted(p.rglob("*")) if f.is_file() and _is_mesh(f)]
+        elif p.exists():
+            out.append(p)
+        else:
+            raise InputError(p, "file not found")
+    return list(dict.fromkeys(f.resolve() for f in out))
+
+
+def _is_mesh(path: Path) -> bool:
+    return path.name.lower().removesuffix(".gz").endswith(MESH_SUFFIXES)
+
+
+def cache_dir(db: str | Path) -> str:
+    """The stage cache of an index: ``<db>.cache`` next to it."""
+    db = Path(db)
+    return str(db.with_name(db.name + ".cache"))
+
+
+@dataclass
+class PartReport:
+    """What indexing did for one part method."""
+
+    method: str
+    params_hash: str
+    todo: int
+    done: int = 0
+    failed: int = 0
+    seconds: float = 0.0
+    failures: list[str] = field(default_factory=list)
+
+
+@dataclass
+class IndexReport:
+    """What :func:`index` did: per part method, the meshes indexed, failed and skipped."""
+
+    db: str
+    method: str
+    n_files: int
+    parts: list[PartReport]
+    seconds: float
+
+
+def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METHOD, labels: str | Path | None = None,
+          workers: int | None = None, executor: str | None = None, retry_failed: bool = False,
+          progress: bool = False) -> IndexReport:
+    """Index every mesh file of ``paths`` (files or folders) into the shape index ``db``.
+
+    Every part method of ``method`` runs in one pass of the executor, part by part, so the stages
+    they share (load, clean, decimate, spectrum) are computed once and read from the index's stage
+    cache afterwards. Unchanged meshes (same content, method and parameters) are skipped.
+
+    Raises
+    ------
+    InputError
+        No mesh file found, a path that does not exist, an unreadable labels file.
+    """
+    from tqdm import tqdm
+
+    from topomatch.pipeline import executors
+    from topomatch.pipeline.cache import hash_file
+    from topomatch.stages.retrieval.labels import read_labels
+
+    files = mesh_files(paths)
+    if not files:
+        raise InputError(None, f"no mesh files ({', '.join(MESH_SUFFIXES)}, optionally .gz) in "
+                               f"{' '.join(map(str, paths))}")
+    label_of = read_labels(labels) if labels else {}
+    db_path = Path(db)
+    hashes = {str(f): hash_file(f) for f in files}
+    t0 = time.perf_counter()
+    plans: dict[str, tuple[PartReport, dict]] = {}
+    todo = []
+    with ShapeIndex(db_path) as store:
+        for part in get_method(method).parts:
+            experiment = method_experiment(part, files, workers=workers, executor=executor)
+            params, phash = params_of(experiment)
+            known = store.known(part, phash, include_failed=not retry_failed)
+            mine = [dataclasses.replace(item, item_id=f"{part}/{item.item_id}") for item in experiment.items()
+                    if hashes[item.input_path] not in known]
+            plans[part] = (PartReport(part, phash, len(mine)), params)
+            todo += mine
+        with tqdm(total=len(todo), desc=f"index {method}", unit="item", disable=not progress) as bar:
+            for r in executors.execute(todo, cache_dir(db_path), experiment.raw.executor):
+                part = r.item_id.split("/", 1)[0]
+                report, params = plans[part]
+                d = r.final("descriptor")
+                store.put(content_hash=hashes[r.input_path], path=r.input_path, label=label_of.get(r.input_path),
+                          method=part, params_hash=report.params_hash, params=params,
+                          status="ok" if r.ok else "failed", reason=r.error,
+                          n_endpoints=None if d is None else d.n_endpoints, kind=None if d is None else d.kind,
+                          descriptor=None if d is None else d.data, seconds=sum(r.seconds.values()))
+                report.done += r.ok
+                report.failed += not r.ok
+                report.seconds += sum(r.seconds.values())
+                bar.update()
+        if label_of:
+            store.set_labels(label_of)
+        for report, _ in plans.values():
+            if report.failed:
+                report.failures = [row.reason or "" for row in store.rows(report.method, report.params_hash,
+                                                                          status="failed")]
+    return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0)
+
+
+# --------------------------------------------------------------------------- query / evaluate
+
+
+@dataclass(frozen=True)
+class QueryResult:
+    """The ranked closest shapes to a query, with the fields ``topomatch query --json`` prints.
+
+    ``results``: one entry per shape, ``rank``, ``path``, ``label``, ``dissimilarity``, ``endpoints``
+    (its endpoint count, or None); ``endpoints``: the query's endpoint count (or None); ``seconds``:
+    ``descriptor`` and ``ranking``; ``indexed``: the shapes ranked.
+    """
+
+    query: str
+    method: str
+    endpoints: int | None
+    indexed: int
+    seconds: dict[str, float]
+    results: list[dict[str, Any]]
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """PSB metrics of a method on the labelled shapes of an index, and where the matrix was written."""
+
+    method: str
+    n: int
+    matrix: str
+    matrix_seconds: float
+    metrics: Any = field(repr=False)  # RetrievalMetrics
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"method": self.method, "n": self.n, "matrix": self.matrix, "matrix_seconds": self.matrix_seconds,
+                **self.metrics.as_dict()}
+
+
+class Collection:
+    """An open shape index: :meth:`query` and :meth:`evaluate` with any indexed method."""
+
+    def __init__(self, db: str | Path):
+        self.db = Path(db)
+        if not self.db.exists():
+            raise InputError(self.db, "index not found (create it with topomatch index)")
+
+    def __repr__(self) -> str:
+        return f"Collection({str(self.db)!r})"
+
+    def methods(self) -> list[tuple[str, str, int]]:
+        """(method, params hash, shapes indexed ok) present in the index."""
+        with ShapeIndex(self.db) as store:
+            return store.methods()
+
+    def _rows(self, method: str) -> list[Row]:
+        phash = params_of(method_experiment(method, []))[1]
+        with ShapeIndex(self.db) as store:
+            rows = store.rows(method, phash)
+            if not rows:
+                present = ", ".join(f"{m} ({n} ok)" for m, _, n in store.methods()) or "nothing"
+                raise ConfigError(f"{self.db}: no shapes indexed with method {method!r} and the current parameters "
+                                  f"(the index has: {present})")
+        return rows
+
+    def parts(self, method: str) -> tuple[list[Row], dict[str, list[Descriptor]]]:
+        """Index rows present for every part of ``method`` (same order), and {part: descriptors}."""
+        parts = get_method(method).parts
+        indexed = {part: self._rows(part) for part in parts}
+        common = set.intersection(*({r.path for r in rows} for rows in indexed.values()))
+        rows = [r for r in indexed[parts[0]] if r.path in common]
+        descriptors = {}
+        for part, part_rows in indexed.items():
+            by_path = {r.path: Descriptor(r.kind, r.descriptor, r.n_endpoints) for r in part_rows}
+            descriptors[part] = [by_path[r.path] for r in rows]
+        return rows, descriptors
+
+    def _part_options(self, part: str, method: Method, options: dict[str, Any] | None) -> MatchOptions:
+        """A part's matching options: the given ones for a single method, each part's own in a fusion."""
+        return get_method(part).match_options() if method.kind == "fusion" else _options(method, options)
+
+    def matrix(self, method: str, descriptors: dict[str, list[Descriptor]],
+               options: dict[str, Any] | None = None) -> np.ndarray:
+        """Full dissimilarity matrix of ``method`` (fused and re-ranked for a fusion)."""
+        from topomatch.stages.retrieval.fusion import fused_matrix
+        from topomatch.stages.retrieval.ranking import dissimilarity_matrix
+
+        m = get_method(method)
+        parts = [dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
+        return fused_matrix(parts, m.fusion) if m.fusion is not None else parts[0]
+
+    def query(self, mesh: str | Path, *, k: int = 10, method: str = DEFAULT_METHOD,
+              options: dict[str, Any] | None = None) -> QueryResult:
+        """The ``k`` closest indexed shapes to a mesh file (its descriptors go through the index's cache)."""
+        from topomatch.stages.retrieval.fusion import fused_query
+        from topomatch.stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
+
+        m = get_method(method)
+        rows, descriptors = self.parts(method)
+        t = time.perf_counter()
+        query = {p: compute_descriptor(mesh, p, cache_dir(self.db))[0] for p in m.parts}
+        t_desc = time.perf_counter() - t
+        t = time.perf_counter()
+        rows_d = [dissimilarities(query[p], descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
+        if m.fusion is not None:
+            mats = [dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
+            d = fused_query(rows_d, mats, m.fusion)
+        else:
+            d = rows_d[0]
+        order = np.argsort(d, kind="stable")[:k]
+        t_rank = time.perf_counter() - t
+        endpoints = next((q.n_endpoints for q in query.values() if q.n_endpoints is not None), None)
+        results = [{"rank": i + 1, "path": rows[j].path, "label": rows[j].label, "dissimilarity": float(d[j]),
+                    "endpoints": rows[j].n_endpoints} for i, j in enumerate(order) if np.isfinite(d[j])]
+        return QueryResult(str(mesh), method, endpoints, len(rows), {"descriptor": t_desc, "ranking": t_rank},
+                           results)
+
+    def evaluate(self, *, method: str = DEFAULT_METHOD, options: dict[str, Any] | None = None,
+                 out: str | Path | None = None) -> Evaluation:
+        """PSB metrics (NN, FT, ST, E, DCG, mAP) of the labelled shapes; the matrix goes to ``out`` (.npz,
+        default ``<db>.<method>.npz``)."""
+        from topomatch.stages.retrieval.metrics import retrieval_metrics
+
+        rows, descriptors = self.parts(method)
+        keep = [i for i, r in enumerate(rows) if r.label]
+        if len(keep) < 2:
+            raise ConfigError(f"{self.db}: fewer than two labelled shapes for {method}; index with --labels")
+        rows = [rows[i] for i in keep]
+        t = time.perf_counter()
+        D = self.matrix(method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, options)
+        seconds = time.perf_counter() - t
+        labels = np.array([r.label for r in rows])
+        metrics = retrieval_metrics(D, labels)
+        path = Path(out) if out else self.db.with_suffix(f".{method}.npz")
+        np.savez_compressed(path, D=D, paths=np.array([r.path for r in rows]), labels=labels)
+        return Evaluation(method, len(rows), str(path), seconds, metrics)
+
+
+def open_index(db: str | Path) -> Collection:
+    """The shape index at ``db`` (created by :func:`index`)."""
+    return Collection(db)
