@@ -94,9 +94,7 @@ class _Encoder:
         return len(self.arrays) - 1
 
     def __call__(self, v: Any) -> Any:  # noqa: C901 - one branch per kind of value
-        if v is None or isinstance(v, (bool, str)):
-            return v
-        if isinstance(v, (int, float)) and type(v) in (int, float):
+        if v is None or type(v) in (bool, int, float, str):  # exact types: numpy's subclasses keep their dtype
             return v
         if isinstance(v, np.ndarray):
             return {"$array": self.array(v)}

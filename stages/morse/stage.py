@@ -16,10 +16,11 @@ from topomatch.stages.morse.function import MorseFunction
 class MorseParams(Params):
     """Parameters of :func:`morse`."""
 
-    function: Literal["mixture", "euclidean", "affine", "fiedler", "height", "geodesic", "agd"] = Field(
-        "mixture", description="mixture distance (thesis ch. 3), its Euclidean or affine part, the Fiedler "
-                               "vector (ch. 4), principal-axis height, heat geodesic distance from the centroid, "
-                               "or average geodesic distance (Hilaga 2001, intrinsic)")
+    function: Literal["fiedler", "mixture", "euclidean", "affine", "height", "geodesic", "agd"] = Field(
+        "fiedler", description="the Fiedler vector (thesis ch. 4, the default: intrinsic, and the better thesis "
+                               "method on SHREC'07), the mixture distance (ch. 3), its Euclidean or affine part, "
+                               "principal-axis height, heat geodesic distance from the centroid, or average "
+                               "geodesic distance (Hilaga 2001, intrinsic)")
     centroid: Literal["vertices", "area", "enclosing_sphere"] = Field(
         "vertices", description="centre c of the distance functions: vertex mean, area centroid, or centre of "
                                 "the minimal enclosing sphere")

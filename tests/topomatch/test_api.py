@@ -1,0 +1,165 @@
+"""The public Python API as a user calls it: same results, fields and defaults as the command line."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import inspect
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import topomatch
+from topomatch.cli import build_parser, main
+from topomatch.pipeline.cli_options import field_of
+from tests_paths import BUNDLED_MESHES, ITK_DIR
+
+
+def cli_json(capsys, *args):
+    code = main([*map(str, args), "--json"])
+    out, _ = capsys.readouterr()
+    assert code == 0
+    return json.loads(out)
+
+
+def test_import_is_lazy_and_lists_the_api():
+    code = ("import sys, topomatch; print('topomatch.pipeline.config' in sys.modules, "
+            "'numpy' in sys.modules, callable(topomatch.skeleton))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["False", "False", "True"]
+    assert {"read_mesh", "skeleton", "match", "index", "open_index", "register", "run_config"} <= set(topomatch.__all__)
+    with pytest.raises(AttributeError, match="no attribute 'nope'"):
+        topomatch.nope  # noqa: B018
+
+
+def test_skeleton_of_a_mesh_equals_the_command(capsys):
+    path = BUNDLED_MESHES / "eight_genus2.off"
+    mesh = topomatch.read_mesh(path)
+    assert mesh.n_vertices > 0 and mesh.F.dtype == np.int64
+    api = topomatch.skeleton(mesh)
+    cli = cli_json(capsys, "skeleton", path)
+    assert set(cli) == set(topomatch.Skeleton.JSON_FIELDS)
+    for key in cli:
+        if key not in ("mesh", "seconds"):
+            assert api.to_dict()[key] == pytest.approx(cli[key]), key
+    assert api.genus == 2 and api.cycle_rank == 2 and api.function == "fiedler"
+    assert api.n_endpoints == len(api.endpoints) and api.graph.number_of_nodes() == api.n_nodes
+    assert api.values.shape == (api.n_vertices,)
+
+
+def test_skeleton_options_and_errors(tmp_path):
+    s = topomatch.skeleton(BUNDLED_MESHES / "torus.off", function="mixture", levels=30)
+    assert s.function == "mixture" and s.levels == 30 and s.cycle_rank == 1 and s.lambda2 is None
+    with pytest.raises(topomatch.ConfigError, match="levels"):
+        topomatch.skeleton(BUNDLED_MESHES / "torus.off", levels=1)
+    with pytest.raises(topomatch.InputError, match="none.off: file not found"):
+        topomatch.skeleton(tmp_path / "none.off")
+    files = topomatch.write_skeleton_files(s, tmp_path / "out")
+    assert all((tmp_path / "out" / name).is_file() for name in ("skeleton.graphml", "skeleton.png"))
+    assert len(files) == 5
+
+
+def test_match_equals_the_command(capsys):
+    a, b = BUNDLED_MESHES / "odedstein_human_man.obj.gz", BUNDLED_MESHES / "odedstein_human_woman.obj.gz"
+    api = topomatch.match(a, b, method="srg")
+    cli = cli_json(capsys, "match", a, b, "--method", "srg")
+    assert api.to_dict() == cli
+    assert topomatch.match(a, a, method="d2").dissimilarity == 0.0
+
+
+def test_index_open_query_evaluate(tmp_path):
+    names = ["torus.off", "eight_genus2.off", "odedstein_cat-low-resolution.obj.gz", "odedstein_spot_low_resolution.obj.gz"]
+    paths = [BUNDLED_MESHES / n for n in names]
+    report = topomatch.index(paths, tmp_path / "s.db", method="d2", workers=1)
+    assert [p.done for p in report.parts] == [4] and report.n_files == 4
+    collection = topomatch.open_index(tmp_path / "s.db")
+    q = collection.query(paths[2], k=2, method="d2")
+    assert q.indexed == 4 and q.results[0]["path"] == str(paths[2].resolve()) and q.results[0]["dissimilarity"] == 0
+    with pytest.raises(topomatch.ConfigError, match="no shapes indexed with method 'hks'"):
+        collection.query(paths[2], method="hks")
+
+
+def test_register_images_in_memory_equals_the_command(capsys):
+    fixed_path, moving_path = ITK_DIR / "BrainProtonDensitySliceBorder20.png", ITK_DIR / "BrainProtonDensitySliceShifted13x17y.png"
+    fixed, moving = topomatch.read_image(fixed_path), topomatch.read_image(moving_path)
+    api = topomatch.register(fixed, moving)
+    cli = cli_json(capsys, "register", fixed_path, moving_path)
+    assert set(cli) == set(topomatch.RegistrationOutcome.JSON_FIELDS)
+    for key in ("tx", "ty", "angle", "objective", "iterations", "ok", "metric", "alpha", "method"):
+        assert api.to_dict()[key] == cli[key], key
+    assert api.ok and api.tx == pytest.approx(13, abs=0.1) and api.ty == pytest.approx(17, abs=0.1)
+
+
+def test_run_config_finds_installed_configs(tmp_path, monkeypatch):
+    from topomatch.experiments import find_config
+
+    monkeypatch.chdir(tmp_path)  # not the repository: configs/ here does not exist
+    assert find_config("configs/registration/demo.yaml").is_file()
+    assert find_config("registration/demo") == find_config("configs/registration/demo.yaml")
+    outcome = topomatch.run_config("configs/registration/demo.yaml", out=tmp_path / "runs")
+    assert not outcome.failed and (outcome.run_dir / "index.html").is_file()
+    with pytest.raises(topomatch.InputError, match="config file not found"):
+        find_config("configs/nope.yaml")
+
+
+# --------------------------------------------------------------------------- one default, everywhere
+
+
+def _subparser(name):
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    return sub.choices[name]
+
+
+#: The module that declares each command's options (its ``_models()``).
+OPTION_MODULES = {"skeleton": "topomatch.cli.skeleton", "register": "topomatch.cli.registration",
+                  "match": "topomatch.cli.retrieval", "query": "topomatch.cli.retrieval",
+                  "evaluate": "topomatch.cli.retrieval", "index": "topomatch.cli.retrieval"}
+
+
+@pytest.mark.parametrize("command", sorted(OPTION_MODULES))
+def test_cli_options_show_the_model_defaults_and_set_nothing_unless_given(command):
+    models = importlib.import_module(OPTION_MODULES[command])._models()
+    generated = [a for a in _subparser(command)._actions if a.dest.startswith("opt__")]
+    assert generated
+    for action in generated:
+        path = action.dest.removeprefix("opt__").replace("__", ".")
+        info, _ = field_of(models, path)
+        default = info.get_default(call_default_factory=True)
+        if default is not None and str(default) != "PydanticUndefined":
+            assert f"(default: {default})" in action.help, (path, action.help)
+        assert action.default is argparse.SUPPRESS, path  # left out, the model's default applies
+
+
+def test_retrieval_defaults_are_the_catalogue_best():
+    from topomatch.retrieval import Collection, index, match
+    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, DEFAULT_PAIR_METHOD
+
+    for command in ("index", "query", "evaluate"):
+        method = next(a for a in _subparser(command)._actions if a.dest == "method")
+        assert method.default == DEFAULT_METHOD
+    assert next(a for a in _subparser("match")._actions if a.dest == "method").default == DEFAULT_PAIR_METHOD
+    assert inspect.signature(index).parameters["method"].default == DEFAULT_METHOD
+    assert inspect.signature(Collection.query).parameters["method"].default == DEFAULT_METHOD
+    assert inspect.signature(match).parameters["method"].default == DEFAULT_PAIR_METHOD
+
+
+def test_unmatched_cost_default_is_the_methods_own():
+    from topomatch.stages.retrieval.catalogue import METHODS
+
+    for m in METHODS.values():
+        if m.kind == "endpoints":
+            assert m.match_options().unmatched_cost == m.unmatched_cost > 0
+            assert m.match_options(unmatched_cost=None).unmatched_cost == m.unmatched_cost
+
+
+def test_skeleton_default_function_is_the_morse_stage_default(capsys):
+    from topomatch.stages.morse.stage import MorseParams
+
+    default = MorseParams().function
+    api = topomatch.skeleton(BUNDLED_MESHES / "torus.off")
+    cli = cli_json(capsys, "skeleton", BUNDLED_MESHES / "torus.off")
+    assert api.function == cli["function"] == default
