@@ -126,8 +126,8 @@ def determinism() -> dict:
 
 def ablation() -> list[dict]:
     pd_ = read_image(ITK / "BrainProtonDensitySlice.png")
-    plain = RegisterParams(schedule=[LevelSpec(factor=1, bins=64, iterations=3000, step=1.0, c=1.0)], normalize=False,
-                           newton=0.0, capture_check=False, retry=False)
+    plain = RegisterParams(schedule=[LevelSpec(factor=1, bins=64, iterations=3000, step=1.0, c=1.0)],
+                           optimizer={"normalize": False, "newton": 0.0}, check={"capture": False, "retry": False})
     variants = {"plain SPSA, 1 level, 64 bins, 3000 it.": plain, "default": RegisterParams()}
     rows = []
     for theta in ((5, 5, 5), (5, 10, 15), (10, 20, 20)):

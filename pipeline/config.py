@@ -246,8 +246,9 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
 
     ``key`` is either a dotted path into the config (``executor.kind``,
     ``name``), ``sweep.stage.param`` for a sweep (value: a list), or
-    ``stage.param`` for a stage of the chain (``noise.sigma``).
-    Values are parsed as YAML scalars (``0.01``, ``true``, ``[1, 2]``).
+    ``stage.param`` for a stage of the chain (``noise.sigma``); a param may
+    be nested (``register.metric.alpha``). Values are parsed as YAML scalars
+    (``0.01``, ``true``, ``[1, 2]``).
     """
     data = copy.deepcopy(data)
     for item in overrides:
@@ -259,8 +260,8 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
         except yaml.YAMLError as exc:
             raise ConfigError(f"--set {item!r}: value is not valid YAML ({exc})") from None
         parts = key.strip().split(".")
-        if parts[0] == "sweep" and len(parts) == 3:  # sweep keys contain a dot: sweep.<stage>.<param>
-            data.setdefault("sweep", {})[f"{parts[1]}.{parts[2]}"] = value
+        if parts[0] == "sweep" and len(parts) >= 3:  # sweep keys contain a dot: sweep.<stage>.<param>
+            data.setdefault("sweep", {})[".".join(parts[1:])] = value
             continue
         if parts[0] in RawConfig.model_fields:
             target = data
@@ -270,7 +271,7 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
                     raise ConfigError(f"--set {key}: {part!r} is not a mapping")
             target[parts[-1]] = value
             continue
-        if len(parts) != 2:
+        if len(parts) < 2:
             raise ConfigError(f"--set {key}: expected a config key or stage.param")
         entries = data.get("stages") or []
         positions = [i for i, e in enumerate(entries) if _entry_name(e) == parts[0]]
@@ -278,10 +279,19 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
             raise ConfigError(f"--set {key}: the chain has {len(positions)} stages called {parts[0]!r}, expected exactly one")
         i = positions[0]
         entry = entries[i]
-        params = dict(entry[parts[0]] or {}) if isinstance(entry, dict) else {}
-        params[parts[1]] = value
+        params = copy.deepcopy(dict(entry[parts[0]] or {})) if isinstance(entry, dict) else {}
+        _set_path(params, parts[1:], value, f"--set {key}")
         entries[i] = {parts[0]: params}
     return data
+
+
+def _set_path(target: dict[str, Any], path: list[str], value: Any, where: str) -> None:
+    """``target[path[0]][path[1]]... = value``, creating mappings on the way."""
+    for part in path[:-1]:
+        target = target.setdefault(part, {})
+        if not isinstance(target, dict):
+            raise ConfigError(f"{where}: {part!r} is not a mapping")
+    target[path[-1]] = value
 
 
 def _entry_name(entry: Any) -> str | None:
@@ -447,29 +457,45 @@ def _merge(base: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
     return base
 
 
-def _sweep_target(key: str, calls: tuple[StageCall, ...]) -> tuple[int, str]:
-    if key.count(".") != 1:
+def _sweep_target(key: str, calls: tuple[StageCall, ...]) -> tuple[int, list[str]]:
+    """(position in the chain, parameter path) of a sweep key ``stage.param`` or ``stage.group.param``."""
+    if key.count(".") < 1:
         raise ConfigError(f"sweep.{key}: expected 'stage.param'")
-    name, param = key.split(".")
+    name, *path = key.split(".")
     matches = [i for i, c in enumerate(calls) if c.label == name]  # a label: 'decimate' is the first, 'decimate#2' ...
     if not matches:
         matches = [i for i, c in enumerate(calls) if c.spec.name == name]
     if len(matches) != 1:
         raise ConfigError(f"sweep.{key}: the chain has {len(matches)} stages called {name!r}, expected exactly one "
                           f"(name a repeated stage by its label: {name}#2, {name}#3, ...)")
-    call = calls[matches[0]]
-    if param not in call.spec.params.model_fields:
-        known = ", ".join(call.spec.params.model_fields) or "none"
-        raise ConfigError(f"sweep.{key}: stage {name!r} has no parameter {param!r} (parameters: {known})")
-    return matches[0], param
+    model: Any = calls[matches[0]].spec.params
+    for depth, part in enumerate(path):
+        fields = getattr(model, "model_fields", None)
+        if fields is None or part not in fields:
+            known = ", ".join(fields or {}) or "none"
+            where = ".".join([name, *path[:depth]])
+            raise ConfigError(f"sweep.{key}: {where!r} has no parameter {part!r} (parameters: {known})")
+        model = _model_of(fields[part].annotation)
+    return matches[0], path
+
+
+def _model_of(annotation: Any) -> Any:
+    """The pydantic model inside an annotation (``Model`` or ``Model | None``), else None."""
+    import typing
+
+    for candidate in (annotation, *typing.get_args(annotation)):
+        if isinstance(candidate, type) and issubclass(candidate, BaseModel):
+            return candidate
+    return None
 
 
 def _with_overrides(calls: tuple[StageCall, ...], point: dict[str, Any]) -> list[StageCall]:
     out = list(calls)
     for key, value in point.items():
-        pos, param = _sweep_target(key, calls)
+        pos, path = _sweep_target(key, calls)
         call = out[pos]
-        values = call.params.model_dump(mode="json") | {param: value}
+        values = call.params.model_dump(mode="json")
+        _set_path(values, path, value, f"sweep.{key}")
         out[pos] = StageCall(call.index, call.label, call.spec, call.spec.params.parse(values, f"sweep.{call.spec.name}"))
     return out
 

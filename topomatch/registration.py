@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from topomatch.pipeline.cli_options import Option
 from topomatch.pipeline.config import chain_with
 from topomatch.pipeline.errors import InputError, StageError
 from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text
@@ -25,9 +26,16 @@ from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.io import read_image as _read_image
 from topomatch.stages.registration.register import Registration, RegisterParams
 
-#: The options of a registration (stage.param...), shared by :func:`register` and ``topomatch register``.
-REGISTER_OPTIONS = ("register.metric", "register.alpha", "register.weights", "register.optimizer", "register.seed",
-                    "load_pair.fixed_slice", "load_pair.moving_slice")
+#: The options of a registration, shared by :func:`register` (keyword -> field) and ``topomatch register``.
+REGISTER_OPTIONS = {
+    "metric": Option("register.metric.name", flag="--metric"),
+    "alpha": Option("register.metric.alpha"),
+    "weights": Option("register.metric.weights"),
+    "optimizer": Option("register.optimizer.name", flag="--optimizer"),
+    "seed": Option("register.seed"),
+    "fixed_slice": Option("load_pair.fixed_slice"),
+    "moving_slice": Option("load_pair.moving_slice"),
+}
 
 CONVENTION = "ITK: T(x) = R(angle)(x - c) + c + t, x = (col, row) px, moving(T(x)) ~ fixed(x)"
 
@@ -120,14 +128,16 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
     StageError
         The registration could not run.
     """
-    given = {"register.metric": metric, "register.alpha": alpha, "register.weights": weights,
-             "register.optimizer": optimizer, "register.seed": seed, "load_pair.fixed_slice": fixed_slice,
-             "load_pair.moving_slice": moving_slice}
+    given = {"metric": metric, "alpha": alpha, "weights": weights, "optimizer": optimizer, "seed": seed,
+             "fixed_slice": fixed_slice, "moving_slice": moving_slice}
     overrides: dict[str, dict[str, Any]] = {}
-    for path, value in given.items():
+    for keyword, value in given.items():
         if value is not None:
-            stage_name, param = path.split(".", 1)
-            overrides.setdefault(stage_name, {})[param] = value
+            stage_name, *path = REGISTER_OPTIONS[keyword].path.split(".")
+            target = overrides.setdefault(stage_name, {})
+            for part in path[:-1]:
+                target = target.setdefault(part, {})
+            target[path[-1]] = value
     return register_with(fixed, moving, overrides)
 
 
@@ -158,7 +168,7 @@ def register_with(fixed: Image | str | Path, moving: Image | str | Path,
     return RegistrationOutcome(
         fixed=names[0], moving=names[1], convention=CONVENTION,
         tx=round(t.tx, 6), ty=round(t.ty, 6), angle=round(t.angle, 6), center=[round(c, 3) for c in t.center],
-        metric=params.metric, alpha=params.alpha, method=reg.method, objective=reg.value,
+        metric=params.metric.name, alpha=params.metric.alpha, method=reg.method, objective=reg.value,
         iterations=reg.iterations, evaluations=reg.evaluations, seconds=round(reg.seconds, 4), ok=reg.ok,
         reason=reg.reason, registration=reg, fixed_image=result.final("fixed") if not in_memory else fixed,
         moving_image=result.final("moving") if not in_memory else moving)

@@ -25,7 +25,7 @@ PARAMETERS = ("tx", "ty", "angle")
 class LandscapeParams(Params):
     """Parameters of :func:`landscape`."""
 
-    metric: Literal["jt", "jr", "mi", "tmi"] = Field("jt", description="measure (see register.metric)")
+    metric: Literal["jt", "jr", "mi", "tmi"] = Field("jt", description="measure (see register.metric.name)")
     weights: Literal["histogram", "uniform"] = Field("histogram", description="Jensen weights")
     alphas: list[float] = Field(default_factory=lambda: [0.5, 1.0, 2.0, 3.0], min_length=1,
                                 description="entropy orders to evaluate (jt, jr, tmi; one curve each)")

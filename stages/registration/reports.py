@@ -432,7 +432,7 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
     evaluations, seen = [], set()
     for r in results:
         for _, ev in _of_type(r, "EvaluateResult"):
-            # a stage before a swept one (e.g. SimpleITK before register.metric) repeats per sweep point: count once
+            # a stage before a swept one (e.g. SimpleITK before register.metric.name) repeats per sweep point: count once
             key = (_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values()))
             if key not in seen:
                 seen.add(key)

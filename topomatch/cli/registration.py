@@ -32,7 +32,7 @@ def _models() -> dict:
 def _options() -> list[Option]:
     from topomatch.registration import REGISTER_OPTIONS
 
-    return [Option(path) for path in REGISTER_OPTIONS]
+    return list(REGISTER_OPTIONS.values())
 
 
 def add_parsers(sub) -> None:

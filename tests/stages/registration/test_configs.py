@@ -47,7 +47,7 @@ def test_analytic_figure_configs(tmp_path):
 
 def test_recovery_config_reduced(tmp_path):
     outcome = _run(CONFIGS / "recovery.yaml", tmp_path, ["sweep.misalign.theta=[[10, 20, 20]]",
-                                                          "sweep.register.metric=[jt, mi]"])
+                                                          "sweep.register.metric.name=[jt, mi]"])
     assert not outcome.failed and len(outcome.items) == 6
     rows = json.loads((outcome.run_dir / "tables" / "fig2_6_to_2_8.json").read_text())
     assert {r["method"].split("/")[1][:2] for r in rows} == {"jt", "mi"}
@@ -67,7 +67,7 @@ def test_landscape_configs_reduced(tmp_path):
 
 def test_accuracy_sweep_config_reduced(tmp_path):
     outcome = _run(CONFIGS / "accuracy_sweep.yaml", tmp_path, ["sweep.misalign_pair.index=[0]",
-                                                                "sweep.register.metric=[jt, mi]"])
+                                                                "sweep.register.metric.name=[jt, mi]"])
     assert not outcome.failed and len(outcome.items) == 4
     rows = json.loads((outcome.run_dir / "tables" / "accuracy.json").read_text())
     overall = {r["method"]: r for r in rows if r["pairs"] == "all"}

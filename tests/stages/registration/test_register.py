@@ -103,12 +103,13 @@ def test_outside_the_capture_range_is_flagged(pd_slice):
     assert not reg.ok
     assert "capture range" in reg.reason
     with pytest.raises(StageError, match="registration failed: .*capture range"):
-        register(pd_slice, moving, RegisterParams(on_failure="error"))
+        register(pd_slice, moving, RegisterParams(check={"on_failure": "error"}))
 
 
 def test_estimate_on_the_search_bound_is_flagged(pd_slice):
     moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 18, 0, 0))
-    reg = register(pd_slice, moving, RegisterParams(max_translation=6, init="geometry", capture_check=False))
+    params = RegisterParams(bounds={"max_translation": 6}, transform={"init": "geometry"}, check={"capture": False})
+    reg = register(pd_slice, moving, params)
     assert not reg.ok and "search bound of tx" in reg.reason
 
 
@@ -129,11 +130,11 @@ def test_small_images_skip_coarse_levels(blob_image):
 
 
 def test_params_are_validated():
-    with pytest.raises(ConfigError, match=r"register.metric: Input should be 'jt', 'jr', 'mi' or 'tmi'"):
+    with pytest.raises(ConfigError, match=r"register.metric.name: Input should be 'jt', 'jr', 'mi' or 'tmi'"):
         RegisterParams.parse({"metric": "nmi"}, "register")
     with pytest.raises(ConfigError, match=r"register.schedule\[0\].bins: Input should be greater than or equal to 2"):
         RegisterParams.parse({"schedule": [{"bins": 1}]}, "register")
     with pytest.raises(ConfigError, match="register.schedule: List should have at least 1 item"):
         RegisterParams.parse({"schedule": []}, "register")
-    with pytest.raises(ConfigError, match="register.alpha: Input should be greater than 0"):
-        RegisterParams.parse({"alpha": 0}, "register")
+    with pytest.raises(ConfigError, match="register.metric.alpha: Input should be greater than 0"):
+        RegisterParams.parse({"metric": {"alpha": 0}}, "register")
