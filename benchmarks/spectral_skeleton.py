@@ -49,7 +49,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from topomatch.stages.mesh.io import read_mesh  # noqa: E402
-from topomatch.stages.spectral.eigensolver import smallest_eigenpairs  # noqa: E402
+from topomatch.stages.spectral.eigen import smallest_eigenpairs  # noqa: E402
 from topomatch.stages.spectral.laplacian import laplacian  # noqa: E402
 
 

@@ -1,7 +1,7 @@
 """Cross-check of the spectral and level-set stages against libigl's own functions.
 
 - Eigenpairs: topomatch's :func:`~topomatch.stages.spectral.laplacian.laplacian` +
-  :func:`~topomatch.stages.spectral.eigensolver.smallest_eigenpairs` against the libigl
+  :func:`~topomatch.stages.spectral.eigen.smallest_eigenpairs` against the libigl
   path ``igl.cotmatrix`` + ``igl.massmatrix(FULL)`` + ``igl.spectra.eigs`` (smallest
   magnitude) on the same mesh: relative eigenvalue differences and, for each
   eigenvector whose eigenvalue is simple, 1 - |<phi_ours, phi_igl>_K| (all but the last pair).
@@ -91,7 +91,7 @@ def libigl_reference(mesh, function, level_sets, *, params: LibiglReferenceParam
     """Compare our eigenpairs with igl.spectra.eigs and our level sets with igl.isolines."""
     import time
 
-    from topomatch.stages.spectral.eigensolver import smallest_eigenpairs
+    from topomatch.stages.spectral.eigen import smallest_eigenpairs
     from topomatch.stages.spectral.laplacian import laplacian
 
     k = params.eigenpairs

@@ -1,7 +1,7 @@
 """The Fiedler vector ``phi2`` of the Laplace–Beltrami operator as a Morse function (thesis ch. 4).
 
 ``phi2`` is the eigenvector of the second smallest eigenvalue of ``Q phi = lambda K phi``
-(:mod:`topomatch.stages.spectral.laplacian`, :mod:`topomatch.stages.spectral.eigensolver`): K-normalised
+(:mod:`topomatch.stages.spectral.laplacian`, :mod:`topomatch.stages.spectral.eigen`): K-normalised
 (``phi2^T K phi2 = 1``), sign fixed by the eigensolver's sign rule (default: positive
 K-weighted skewness). It is invariant under rotations and translations; under a uniform
 scale ``s`` it becomes ``phi2 / s`` (and ``lambda -> lambda / s^2``), so its level sets do
@@ -25,7 +25,7 @@ from pydantic import Field
 from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.morse.function import MorseFunction
-from topomatch.stages.spectral.eigensolver import Eigenpairs, relative_gap, smallest_eigenpairs
+from topomatch.stages.spectral.eigen import Eigenpairs, relative_gap, smallest_eigenpairs
 from topomatch.stages.spectral.laplacian import MassType, laplacian
 
 

@@ -12,7 +12,7 @@ Conventions (thesis ch. 4, written once here):
   ``igl.massmatrix(V, F, igl.MASSMATRIX_TYPE_FULL)``. ``mass="voronoi"`` is libigl's
   diagonal mixed-Voronoi lumped mass (``MASSMATRIX_TYPE_VORONOI``). Both sum to the
   surface area: ``1^T K 1 = area``.
-- The eigenproblem is ``Q phi = lambda K phi`` (see :mod:`topomatch.stages.spectral.eigensolver`).
+- The eigenproblem is ``Q phi = lambda K phi`` (see :mod:`topomatch.stages.spectral.eigen`).
 
 Assembly. ``Q`` and the full ``K`` are assembled here with vectorised numpy (same
 formulas as libigl: squared edge lengths, Kahan's stable Heron formula for the double

@@ -30,7 +30,7 @@ def spectral_figures_report(experiment, results, params: SpectralFiguresParams) 
 
     from topomatch.stages.mesh.render import UP_ORDER, draw_mesh, z_up
     from topomatch.stages.reeb.level_sets import isolines, level_values
-    from topomatch.stages.spectral.eigensolver import smallest_eigenpairs
+    from topomatch.stages.spectral.eigen import smallest_eigenpairs
     from topomatch.stages.spectral.laplacian import laplacian
 
     unique = {r.input_path: r for r in reversed(results) if r.ok and r.final("mesh") is not None}

@@ -21,9 +21,9 @@ Definition used here
    ``sigma = -0.01 * 4 pi / A`` (slightly negative, so ``Q - sigma K`` is positive definite;
    ``4 pi / A`` is the Weyl-law spacing of the spectrum of a surface of area ``A``, so the
    shift scales with the shape), with a fixed start vector (deterministic), and the zero is
-   dropped; components of at most 400 vertices are solved densely. ``Q - sigma K`` is factorised once by the project's
-   :class:`~topomatch.stages.spectral.eigensolver.ShiftInvert` (qdldl sparse LDL^T, ~1.7x faster than
-   eigsh's own SuperLU; SuperLU when qdldl is missing).
+   dropped; components of at most 400 vertices are solved densely. This is the ``arpack`` method
+   of :func:`~topomatch.stages.spectral.eigen.smallest_eigenpairs` (``Q - sigma K`` factorised once
+   by qdldl's sparse LDL^T, ~1.7x faster than eigsh's own SuperLU).
 3. **Scale normalisation** (``normalization``): ``'area_index'`` [default] multiplies by the
    surface area and divides by the index, ``lambda_i * A / i`` (i = 1..k); ``'area'`` only
    multiplies by the area, ``lambda_i * A`` (Reuter et al.'s area normalisation; eigenvalues
@@ -72,11 +72,19 @@ class ShapeDNAParams(Params):
 def _component_nonzero_eigenvalues(Q, K, want: int, sigma: float, name: str) -> np.ndarray:
     """The ``want`` smallest eigenvalues of one connected component, its zero dropped (ascending).
 
-    Fewer are returned when the component has fewer than ``want + 1`` vertices.
+    Fewer are returned when the component has fewer than ``want + 1`` vertices (all of them, densely).
     """
-    from topomatch.stages.spectral.spectrum import shift_invert_eigsh
+    from topomatch.stages.spectral.eigen import smallest_eigenpairs
 
-    return shift_invert_eigsh(Q, K, min(want + 1, Q.shape[0]), sigma, name)[1:]
+    n = Q.shape[0]
+    if n < 2:
+        return np.zeros(0)
+    k = min(want + 1, n)
+    try:
+        pairs = smallest_eigenpairs(Q, K, k, method="arpack", sigma=sigma)
+    except StageError as exc:
+        raise StageError(f"{name}: {k} eigenvalues of a {n}-vertex component: {exc}") from None
+    return pairs.values[1:]
 
 
 def eigenvalues(mesh: Mesh, k: int, mass: Literal["full", "voronoi"] = "full") -> tuple[np.ndarray, float]:
@@ -88,7 +96,7 @@ def eigenvalues(mesh: Mesh, k: int, mass: Literal["full", "voronoi"] = "full") -
     run on the whole matrix would find only one vector of an eigenvalue shared exactly by
     several components (a Krylov space holds one direction per eigenspace; e.g. it misses
     one of the six copies of ``lambda_1`` of two identical spheres). Components of at most
-    ``stages.spectral.spectrum.DENSE_MAX`` vertices are solved densely. Within one connected component ARPACK
+    400 vertices are solved densely. Within one connected component ARPACK
     recovers exactly repeated eigenvalues (symmetric shapes) through round-off; the
     unit-sphere test (exact 3- and 5-fold multiplicities on the icosphere) checks that.
 

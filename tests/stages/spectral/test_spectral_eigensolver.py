@@ -8,7 +8,7 @@ import scipy.sparse.linalg as sla
 
 from topomatch.pipeline.errors import StageError
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.spectral.eigensolver import (ShiftInvert, fix_signs, relative_gap, skewness, smallest_eigenpairs)
+from topomatch.stages.spectral.eigen import (ShiftInvert, fix_signs, relative_gap, skewness, smallest_eigenpairs)
 from topomatch.stages.spectral.laplacian import laplacian
 
 SPOT = "odedstein_spot_low_resolution.obj.gz"
@@ -214,7 +214,8 @@ def test_relative_gap():
 
 
 def test_lobpcg_without_geometry_and_thick_restarts(bundled_mesh):
-    from topomatch.stages.spectral import eigensolver as es
+    from topomatch.stages.spectral.eigen.block_krylov import block_krylov
+    from topomatch.stages.spectral.eigen.problem import Problem, start_block
 
     mesh = bundled_mesh(HAND)
     lap = laplacian(mesh)
@@ -223,10 +224,10 @@ def test_lobpcg_without_geometry_and_thick_restarts(bundled_mesh):
     np.testing.assert_allclose(e.values, ref.values, rtol=1e-9)
     assert np.all(e.residuals <= 1e-5)
     # a basis of at most 8 vectors forces thick restarts; the answer does not change
-    prob = es._Problem(lap.Q, lap.K)
-    with es.ShiftInvert(lap.Q, lap.K, -0.1) as fac:
-        X0 = es._start_block(prob, 3, mesh.V, seed=0)
-        theta, X, steps, n_solves = es._block_krylov(prob, fac.solve, X0, 2, 1e-7, 200, 8)
+    prob = Problem(lap.Q, lap.K)
+    with ShiftInvert(lap.Q, lap.K, -0.1) as fac:
+        X0 = start_block(prob, 3, mesh.V, seed=0)
+        theta, X, steps, n_solves = block_krylov(prob, fac.solve, X0, 2, 1e-7, 200, 8)
     np.testing.assert_allclose(theta, ref.values[1:], rtol=1e-10)
     assert steps > 4
 
