@@ -65,8 +65,13 @@ sys.path.insert(0, str(REPO))
 
 from topomatch.stages.mesh.clean import CleanParams, clean_mesh  # noqa: E402
 from topomatch.stages.mesh.io import read_mesh  # noqa: E402
-from topomatch.stages.retrieval.baselines import BASELINES, d2, shapedna  # noqa: E402
+from topomatch.stages.retrieval.baselines import d2, shapedna, spherical_harmonics  # noqa: E402
 from topomatch.stages.retrieval.metrics import METRIC_NAMES, retrieval_metrics  # noqa: E402
+
+#: The baselines measured here: name -> (module with descriptor / distance_matrix, params type).
+BASELINES = {"d2": (d2, d2.D2Params),
+             "spherical_harmonics": (spherical_harmonics, spherical_harmonics.SphericalHarmonicsParams),
+             "shapedna": (shapedna, shapedna.ShapeDNAParams)}
 
 DEFAULT_MESHES = ("torus.off", "odedstein_hand_lowres.obj.gz", "odedstein_koala_low_resolution.obj.gz",
                   "odedstein_human_man.obj.gz", "odedstein_cat-low-resolution.obj.gz",
@@ -79,11 +84,11 @@ def time_descriptors(names: list[str], repeat: int) -> list[dict]:
         mesh, _ = read_mesh(REPO / "data" / "meshes" / name)
         row = {"mesh": name, "vertices": mesh.n_vertices, "faces": mesh.n_faces}
         times: dict[str, list[float]] = {k: [] for k in BASELINES}
-        for b in BASELINES.values():  # warm-up (imports, cached tables)
-            b.descriptor(mesh, b.params())
+        for b, P in BASELINES.values():  # warm-up (imports, cached tables)
+            b.descriptor(mesh, P())
         for _ in range(repeat):
-            for key, b in BASELINES.items():
-                params = b.params()
+            for key, (b, P) in BASELINES.items():
+                params = P()
                 start = time.perf_counter()
                 b.descriptor(mesh, params)
                 times[key].append(time.perf_counter() - start)
@@ -115,7 +120,7 @@ def time_matrices(repeat: int, n: int = 400, classes: int = 20) -> list[dict]:
         ts = []
         for _ in range(repeat):
             start = time.perf_counter()
-            D = BASELINES[key].distance_matrix(X)
+            D = BASELINES[key][0].distance_matrix(X)
             ts.append(time.perf_counter() - start)
         rows.append({"what": f"{key} distance_matrix ({n} x {n})", "ms": 1000 * statistics.median(ts)})
     ts = []
@@ -132,7 +137,7 @@ def time_matrices(repeat: int, n: int = 400, classes: int = 20) -> list[dict]:
 
 def _variants(with_variants: bool) -> dict[str, tuple[str, object]]:
     """label -> (baseline, params) of the methods evaluated on Watertight."""
-    out = {name: (name, b.params()) for name, b in BASELINES.items()}
+    out = {name: (name, P()) for name, (_, P) in BASELINES.items()}
     if with_variants:
         out["d2_128bins"] = ("d2", d2.D2Params(bins=128))
         out["shapedna_area"] = ("shapedna", shapedna.ShapeDNAParams(normalization="area"))
@@ -166,7 +171,7 @@ def _describe(args: tuple[str, bool]) -> dict[str, object]:
                 vals, area = cache["dna"]
                 out[label] = shapedna.normalize(vals[:params.k], area, params.normalization)
             else:
-                out[label] = BASELINES[base].descriptor(mesh, params)
+                out[label] = BASELINES[base][0].descriptor(mesh, params)
         except Exception as exc:  # a bad mesh must not stop the others; reported below
             out[label] = f"{type(exc).__name__}: {exc}"  # text: not every exception type pickles
         out[label + "_s"] = time.perf_counter() - start
@@ -190,7 +195,7 @@ def watertight(root: Path, workers: int, with_variants: bool) -> tuple[str, dict
         failed = {paths[i]: str(results[i][label]) for i in range(len(paths)) if i not in set(ok)}
         X = np.stack([results[i][label] for i in ok])
         t0 = time.perf_counter()
-        D = BASELINES[base].distance_matrix(X)
+        D = BASELINES[base][0].distance_matrix(X)
         t_matrix = time.perf_counter() - t0
         m = retrieval_metrics(D, labels[ok])
         per_mesh = statistics.median(results[i][label + "_s"] for i in ok)

@@ -28,7 +28,8 @@ import tracemalloc
 
 import numpy as np
 
-from topomatch.stages.retrieval.descriptor import Descriptor, MatchOptions
+from topomatch.stages.retrieval.catalogue import get_method
+from topomatch.stages.retrieval.descriptor import Descriptor
 from topomatch.stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
 
 
@@ -55,14 +56,13 @@ def simulated_fusion(n: int, rng: np.random.Generator) -> dict[str, list[Descrip
 
 
 def fused_benchmark(args, rng) -> None:
-    from topomatch.pipeline.retrieval_cli import indexed_parts
-    from topomatch.stages.retrieval.fusion import FUSIONS, fused_matrix, fused_query, median_scale
-    from topomatch.stages.retrieval.methods import default_match_options
+    from topomatch.retrieval import open_index
+    from topomatch.stages.retrieval.fusion import fused_matrix, fused_query, median_scale
 
-    fusion = FUSIONS[args.method]
-    rows, parts = indexed_parts(args.db, args.method)
+    fusion = get_method(args.method).fusion
+    rows, parts = open_index(args.db).parts(args.method)
     n = len(rows)
-    opts = {p: default_match_options(p) for p in fusion.parts}
+    opts = {p: get_method(p).match_options() for p in fusion.parts}
 
     def prepare():
         return [dissimilarity_matrix(parts[p], p, opts[p]) for p in fusion.parts]
@@ -108,16 +108,15 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
     rng = np.random.default_rng(0)
-    from topomatch.stages.retrieval.fusion import FUSIONS
-
-    if args.method in FUSIONS:
+    method = get_method(args.method)
+    if method.kind == "fusion":
         if not args.db:
             parser.error(f"--method {args.method} needs --db (an index with all its parts)")
         fused_benchmark(args, rng)
         return
-    options = MatchOptions(unmatched_cost=0.2)
+    options = method.match_options()
     if args.db:
-        from topomatch.pipeline.shape_index import ShapeIndex
+        from topomatch.shape_index import ShapeIndex
 
         with ShapeIndex(args.db) as index:
             rows = index.rows(args.method)

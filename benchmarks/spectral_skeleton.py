@@ -9,7 +9,7 @@ Loading is excluded from every timing. Measured in the same process, interleaved
 times each, medians reported:
 
 - **ours**: ``stages.spectral.laplacian.laplacian`` (vectorised assembly + validation, connected
-  components included) + ``stages.spectral.eigensolver.smallest_eigenpairs(Q, K, k)``
+  components included) + ``topomatch.stages.spectral.eigen.smallest_eigenpairs(Q, K, k)``
   (``method='auto'``, i.e. sparse LDL^T of ``Q - sigma K`` + block Krylov; the constant counts in k);
 - **reference**: ``igl.cotmatrix`` + ``igl.massmatrix(FULL)`` + ``igl.spectra.eigs(-L, M, k,
   EIGS_TYPE_SM)``, the path DESIGN.md names as the reference.
