@@ -12,8 +12,8 @@ still printed, with the reason), 1 for unreadable or unusable images, 2 for bad 
 from __future__ import annotations
 
 import argparse
-import json
 
+from topomatch.cli.output import print_result
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 from topomatch.pipeline.errors import TopomatchError
 
@@ -56,13 +56,8 @@ def cmd_register(args: argparse.Namespace) -> int:
     summary = outcome.to_dict()
     if args.out:
         summary["files"] = write_registration_files(outcome, args.out)
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        for key in ("tx", "ty", "angle", "objective", "iterations", "seconds", "ok", "reason", "method", "center",
-                    "files"):
-            if key in summary and (key != "reason" or summary[key]):
-                print(f"{key:>10}: {summary[key]}")
+    print_result(summary, as_json=args.json, keys=("tx", "ty", "angle", "objective", "iterations", "seconds", "ok",
+                                                   "reason", "method", "center", "files"))
     if not outcome.ok:
         raise RegistrationFlagged(f"registration flagged: {outcome.reason}")
     return 0

@@ -22,6 +22,10 @@ def _models() -> dict:
     return {"match": MatchOptions, "executor": ExecutorConfig}
 
 
+#: The executor options of ``index`` (from the config's executor settings).
+EXECUTOR_OPTIONS = (Option("executor.workers", default_help="all cores"), Option("executor.kind", flag="--executor"))
+
+
 def _match_options() -> list[Option]:
     from topomatch.stages.retrieval.catalogue import METHODS
 
@@ -67,8 +71,7 @@ def add_parsers(sub) -> None:
     _method_arg(p, DEFAULT_METHOD)
     p.add_argument("--labels", help="CSV with columns relative_path (or path) and class (or label), paths "
                                     "relative to the CSV's folder")
-    add_options(p, _models(), [Option("executor.workers", default_help="all cores"),
-                               Option("executor.kind", flag="--executor")])
+    add_options(p, _models(), EXECUTOR_OPTIONS)
     p.add_argument("--retry-failed", action="store_true", help="recompute meshes recorded as failed")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     p.set_defaults(handler=cmd_index)
@@ -112,8 +115,7 @@ def cmd_match(args: argparse.Namespace) -> int:
 def cmd_index(args: argparse.Namespace) -> int:
     from topomatch.retrieval import index
 
-    executor = given_options(args, _models(), ["executor.workers", Option("executor.kind", flag="--executor")])
-    settings = executor.get("executor", {})
+    settings = given_options(args, _models(), EXECUTOR_OPTIONS).get("executor", {})
     report = index(args.paths, args.db, method=args.method, labels=args.labels, workers=settings.get("workers"),
                    executor=settings.get("kind"), retry_failed=args.retry_failed,
                    progress=not args.no_progress)

@@ -8,8 +8,8 @@ as GraphML, JSON and an OBJ polyline, the unpruned Reeb graph as GraphML, and a 
 from __future__ import annotations
 
 import argparse
-import json
 
+from topomatch.cli.output import print_result
 from topomatch.pipeline.cli_options import add_options, given_options
 
 
@@ -43,9 +43,5 @@ def cmd_skeleton(args: argparse.Namespace) -> int:
     summary = result.to_dict()
     if args.out:
         summary["files"] = write_skeleton_files(result, args.out)
-    if args.json:
-        print(json.dumps(summary))
-    else:
-        for key, value in summary.items():
-            print(f"{key:>17}: {value}")
+    print_result(summary, as_json=args.json)
     return 0
