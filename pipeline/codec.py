@@ -1,8 +1,10 @@
 """Typed serialisation of stage results, with no pickle: JSON for the structure, ``.npz`` for arrays.
 
-:func:`dumps` turns a result into the bytes of one ``.npz`` archive: every numpy array becomes
-an archive member (``a0``, ``a1``, ...) and the rest of the value becomes a JSON document
-(member ``__meta__``, UTF-8) with a schema version. :func:`loads` reads it back with
+:func:`dumps` turns a result into the bytes of one ``.npz`` archive of two members: ``__blob__``,
+the raw bytes of every numpy array of the value one after the other (16-byte aligned; a skeleton
+holds hundreds of small arrays, and one member each made loading 13x slower than pickle), and
+``__meta__``, a UTF-8 JSON document with a schema version, the value's structure and each array's
+dtype, shape, memory order and place in the blob. :func:`loads` reads it back with
 ``allow_pickle=False`` and rebuilds only these kinds of values:
 
 - ``None``, bools, ints, floats (NaN and infinities too), strings, bytes, lists, tuples, sets,
@@ -10,7 +12,10 @@ an archive member (``a0``, ``a1``, ...) and the rest of the value becomes a JSON
 - numpy arrays of numeric, bool or string dtype, and numpy scalars (dtype kept);
 - ``scipy.sparse`` CSR / CSC / COO matrices and arrays;
 - ``networkx`` graphs (``Graph``, ``DiGraph``, ``MultiGraph``, ``MultiDiGraph``) with their node,
-  edge and graph attributes;
+  edge and graph attributes, stored by column: the node ids, each node attribute, the edge ends,
+  keys and each edge attribute as one array where the values allow it (numbers of one type,
+  arrays of one shape, 1-D arrays of one dtype concatenated), so a Reeb graph of hundreds of
+  nodes is a dozen arrays, not hundreds of JSON objects;
 - dataclasses, named tuples, enums and pydantic models **of a registered type**: the types that
   the engine found in the scanned stage modules (:func:`register_types`, called by
   :func:`topomatch.pipeline.registry.discover`). A type is named ``module:QualName`` in the
@@ -30,13 +35,17 @@ import dataclasses
 import enum
 import io
 import json
+import math
 from pathlib import Path, PurePath
 from typing import Any, Iterable
 
 import numpy as np
 
 #: Bump when the document layout changes (older entries become misses).
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+
+#: Alignment of the arrays in the blob (bytes).
+_ALIGN = 16
 
 _TYPES: dict[str, type] = {}
 
@@ -88,10 +97,24 @@ class _Encoder:
         self.arrays: list[np.ndarray] = []
 
     def array(self, a: np.ndarray) -> int:
-        if a.dtype.hasobject:
-            raise CodecError(f"cannot store an array of Python objects (dtype {a.dtype})")
-        self.arrays.append(a)  # np.save keeps the memory order (C or Fortran): downstream BLAS sees the same layout
+        if a.dtype.hasobject or a.dtype.fields is not None:
+            raise CodecError(f"cannot store an array of Python objects or records (dtype {a.dtype})")
+        self.arrays.append(a)
         return len(self.arrays) - 1
+
+    def blob(self) -> tuple[bytes, list[list]]:
+        """The arrays' bytes, each in its own memory order (C, or Fortran for an F-contiguous array,
+        so that downstream BLAS sees the same layout), and their [dtype, shape, fortran, offset, nbytes]."""
+        parts, table, offset = [], [], 0
+        for a in self.arrays:
+            fortran = a.ndim > 1 and a.flags.f_contiguous and not a.flags.c_contiguous
+            raw = (np.asfortranarray(a) if fortran else np.ascontiguousarray(a)).tobytes(order="F" if fortran else "C")
+            pad = -offset % _ALIGN
+            parts += [b"\0" * pad, raw]
+            offset += pad
+            table.append([a.dtype.str, list(a.shape), fortran, offset, len(raw)])
+            offset += len(raw)
+        return b"".join(parts), table
 
     def __call__(self, v: Any) -> Any:  # noqa: C901 - one branch per kind of value
         if v is None or type(v) in (bool, int, float, str):  # exact types: numpy's subclasses keep their dtype
@@ -121,11 +144,15 @@ class _Encoder:
         module = cls.__module__.split(".")[0]
         if module == "networkx" and cls.__name__ in _GRAPHS:
             multi = v.is_multigraph()
-            edges = v.edges(keys=True, data=True) if multi else v.edges(data=True)
-            return {"$graph": cls.__name__, "graph": self(dict(v.graph)),
-                    "nodes": [[self(n), self(dict(d))] for n, d in v.nodes(data=True)],
-                    "edges": [[self(e[0]), self(e[1]), *([self(e[2])] if multi else []), self(dict(e[-1]))]
-                              for e in edges]}
+            nodes = list(v.nodes(data=True))
+            edges = list(v.edges(keys=True, data=True) if multi else v.edges(data=True))
+            out = {"$graph": cls.__name__, "graph": self(dict(v.graph)),
+                   "nodes": self.column([n for n, _ in nodes]), "node_attrs": self.records([d for _, d in nodes]),
+                   "u": self.column([e[0] for e in edges]), "v": self.column([e[1] for e in edges]),
+                   "edge_attrs": self.records([e[-1] for e in edges])}
+            if multi:
+                out["keys"] = self.column([e[2] for e in edges])
+            return out
         if module == "scipy" and cls.__name__ in _SPARSE_COMPRESSED:
             return {"$sparse": cls.__name__, "shape": list(v.shape), "data": self.array(v.data),
                     "indices": self.array(v.indices), "indptr": self.array(v.indptr)}
@@ -133,6 +160,36 @@ class _Encoder:
             return {"$sparse": cls.__name__, "shape": list(v.shape), "data": self.array(v.data),
                     "row": self.array(v.row), "col": self.array(v.col)}
         raise CodecError(f"cannot store a value of type {cls.__module__}.{cls.__qualname__}")
+
+    def column(self, values: list) -> dict:
+        """A list of values as one array when they allow it (module docstring of the graph layout):
+        numpy scalars of one dtype, Python floats / ints / bools, arrays of one shape and dtype
+        (stacked), 1-D arrays of one dtype (concatenated, with their lengths); else one by one."""
+        kinds = {type(x) for x in values}
+        if len(kinds) == 1 and values:
+            kind = next(iter(kinds))
+            if kind in (float, bool) or (kind is int and all(-2**63 <= x < 2**63 for x in values)):
+                return {"py": kind.__name__, "a": self.array(np.array(values, dtype={float: np.float64, int: np.int64,
+                                                                                      bool: np.bool_}[kind]))}
+            if issubclass(kind, np.generic) and len({x.dtype for x in values}) == 1 and kind is not np.object_:
+                return {"np": self.array(np.array(values, dtype=values[0].dtype))}
+            if kind is np.ndarray and len({x.dtype for x in values}) == 1 and not values[0].dtype.hasobject:
+                if len({x.shape for x in values}) == 1 and values[0].ndim >= 1:
+                    return {"stack": self.array(np.stack(values))}
+                if all(x.ndim == 1 for x in values):
+                    return {"ragged": self.array(np.concatenate(values)),
+                            "lengths": self.array(np.array([len(x) for x in values], dtype=np.int64))}
+        return {"list": [self(x) for x in values]}
+
+    def records(self, dicts: list[dict]) -> list:
+        """A list of attribute dicts as columns: [[key, column or None where a record lacks the key]]."""
+        keys = list(dict.fromkeys(k for d in dicts for k in d))
+        out = []
+        for key in keys:
+            present = [key in d for d in dicts]
+            values = [d[key] for d in dicts if key in d]
+            out.append([self(key), self.column(values), None if all(present) else present])
+        return out
 
     @staticmethod
     def known(cls: type) -> str:
@@ -146,10 +203,10 @@ def dumps(value: Any) -> bytes:
     """The ``.npz`` bytes of ``value`` (module docstring). Raises :class:`CodecError`."""
     enc = _Encoder()
     doc = {"schema": SCHEMA_VERSION, "value": enc(value)}
-    members = {f"a{i}": a for i, a in enumerate(enc.arrays)}
-    members["__meta__"] = np.frombuffer(json.dumps(doc).encode("utf-8"), dtype=np.uint8)
+    blob, doc["arrays"] = enc.blob()
     buf = io.BytesIO()
-    np.savez(buf, **members)
+    np.savez(buf, __meta__=np.frombuffer(json.dumps(doc).encode("utf-8"), dtype=np.uint8),
+             __blob__=np.frombuffer(blob, dtype=np.uint8))
     return buf.getvalue()
 
 
@@ -157,13 +214,23 @@ def dumps(value: Any) -> bytes:
 
 
 class _Decoder:
-    def __init__(self, archive) -> None:
-        self.archive = archive
+    def __init__(self, blob: np.ndarray, table: Any) -> None:
+        if blob.dtype != np.uint8 or blob.ndim != 1 or not isinstance(table, list):
+            raise CodecError("bad array blob")
+        self.blob, self.table = blob, table
 
     def array(self, i: Any) -> np.ndarray:
-        if not isinstance(i, int) or f"a{i}" not in self.archive.files:
-            raise CodecError(f"missing array member a{i}")
-        return self.archive[f"a{i}"]
+        if not isinstance(i, int) or not 0 <= i < len(self.table):
+            raise CodecError(f"no array {i!r}")
+        dtype_str, shape, fortran, offset, nbytes = self.table[i]
+        dtype = np.dtype(dtype_str)
+        if dtype.hasobject or dtype.fields is not None:
+            raise CodecError(f"array {i}: dtype {dtype_str} is not allowed")
+        count = math.prod(shape)
+        if count * dtype.itemsize != nbytes or offset < 0 or offset + nbytes > self.blob.size:
+            raise CodecError(f"array {i}: {nbytes} bytes at {offset} do not hold {shape} of {dtype_str}")
+        flat = np.frombuffer(self.blob, dtype=dtype, count=count, offset=offset)
+        return flat.reshape(shape, order="F" if fortran else "C").copy(order="K")
 
     def __call__(self, v: Any) -> Any:  # noqa: C901
         if v is None or isinstance(v, (bool, int, float, str)):
@@ -216,13 +283,17 @@ class _Decoder:
                 raise CodecError(f"unknown graph class {v['$graph']!r}")
             G = getattr(nx, v["$graph"])()
             G.graph.update(self(v["graph"]))
-            for n, d in v["nodes"]:
-                G.add_node(_hashable(self(n)), **self(d))
-            for e in v["edges"]:
-                if G.is_multigraph():
-                    G.add_edge(_hashable(self(e[0])), _hashable(self(e[1])), key=_hashable(self(e[2])), **self(e[3]))
-                else:
-                    G.add_edge(_hashable(self(e[0])), _hashable(self(e[1])), **self(e[2]))
+            nodes = [_hashable(n) for n in self.column(v["nodes"])]
+            G.add_nodes_from(zip(nodes, self.records(v["node_attrs"], len(nodes))))
+            u, w = self.column(v["u"]), self.column(v["v"])
+            attrs = self.records(v["edge_attrs"], len(u))
+            if len(w) != len(u):
+                raise CodecError("edge columns of different lengths")
+            if G.is_multigraph():
+                keys = self.column(v["keys"])
+                G.add_edges_from((_hashable(a), _hashable(b), _hashable(k), d) for a, b, k, d in zip(u, w, keys, attrs))
+            else:
+                G.add_edges_from((_hashable(a), _hashable(b), d) for a, b, d in zip(u, w, attrs))
             return G
         if tag == "$sparse":
             import scipy.sparse as sp
@@ -237,6 +308,39 @@ class _Decoder:
             return getattr(sp, name)((self.array(v["data"]), self.array(v["indices"]), self.array(v["indptr"])),
                                      shape=shape)
         raise CodecError(f"unknown tag {tag!r}")
+
+    def column(self, spec: Any) -> list:
+        """The values of an encoded column (see :meth:`_Encoder.column`)."""
+        if not isinstance(spec, dict) or len(spec) == 0:
+            raise CodecError("bad column")
+        if "list" in spec:
+            return [self(x) for x in spec["list"]]
+        if "py" in spec:
+            if spec["py"] not in ("float", "int", "bool"):
+                raise CodecError(f"bad column kind {spec['py']!r}")
+            return self.array(spec["a"]).tolist()
+        if "np" in spec:
+            return list(self.array(spec["np"]))
+        if "stack" in spec:
+            return [x.copy() for x in self.array(spec["stack"])]
+        if "ragged" in spec:
+            data, lengths = self.array(spec["ragged"]), self.array(spec["lengths"])
+            if lengths.dtype != np.int64 or lengths.ndim != 1 or lengths.sum() != data.size or (lengths < 0).any():
+                raise CodecError("bad ragged column")
+            return [x.copy() for x in np.split(data, np.cumsum(lengths)[:-1])] if lengths.size else []
+        raise CodecError(f"bad column {sorted(spec)}")
+
+    def records(self, spec: Any, n: int) -> list[dict]:
+        """``n`` attribute dicts from their encoded columns (see :meth:`_Encoder.records`)."""
+        out: list[dict] = [{} for _ in range(n)]
+        for key, column, present in spec:
+            key, values = _hashable(self(key)), self.column(column)
+            rows = range(n) if present is None else [i for i, p in enumerate(present) if p]
+            if len(values) != len(rows) or (present is not None and len(present) != n):
+                raise CodecError(f"column {key!r} does not match {n} records")
+            for i, value in zip(rows, values):
+                out[i][key] = value
+        return out
 
     @staticmethod
     def known(name: Any, base: type | None) -> type:
@@ -256,14 +360,13 @@ def loads(data: bytes) -> Any:
     """Rebuild the value written by :func:`dumps`. Raises :class:`CodecError` for anything invalid."""
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as archive:
-            meta = archive["__meta__"]
-            if meta.dtype != np.uint8 or meta.ndim != 1:
-                raise CodecError("bad __meta__ member")
-            doc = json.loads(meta.tobytes().decode("utf-8"))
-            if not isinstance(doc, dict) or doc.get("schema") != SCHEMA_VERSION:
-                raise CodecError(f"schema {doc.get('schema') if isinstance(doc, dict) else '?'} is not "
-                                 f"{SCHEMA_VERSION}")
-            return _Decoder(archive)(doc["value"])
+            meta, blob = archive["__meta__"], archive["__blob__"]
+        if meta.dtype != np.uint8 or meta.ndim != 1:
+            raise CodecError("bad __meta__ member")
+        doc = json.loads(meta.tobytes().decode("utf-8"))
+        if not isinstance(doc, dict) or doc.get("schema") != SCHEMA_VERSION:
+            raise CodecError(f"schema {doc.get('schema') if isinstance(doc, dict) else '?'} is not {SCHEMA_VERSION}")
+        return _Decoder(blob, doc.get("arrays"))(doc["value"])
     except CodecError:
         raise
     except RecursionError:

@@ -138,23 +138,30 @@ def test_unregistered_types_are_not_written():
         codec.dumps(lambda: 0)
 
 
-def _entry(doc: dict | str, arrays: dict | None = None) -> bytes:
+def _entry(doc: dict | str, blob: np.ndarray | None = None) -> bytes:
     text = doc if isinstance(doc, str) else json.dumps(doc)
     buf = io.BytesIO()
-    np.savez(buf, __meta__=np.frombuffer(text.encode(), dtype=np.uint8), **(arrays or {}))
+    np.savez(buf, __meta__=np.frombuffer(text.encode(), dtype=np.uint8),
+             __blob__=np.zeros(64, dtype=np.uint8) if blob is None else blob)
     return buf.getvalue()
 
 
 CRAFTED = {
-    "pickle in an array member": lambda: _entry({"schema": 1, "value": {"$array": 0}},
-                                                {"a0": np.array([print], dtype=object)}),
-    "a raw pickle": lambda: b"\x80\x04\x95" + b"cos\nsystem\n(S'touch /tmp/pwned'\ntR." ,
-    "an unknown type name": lambda: _entry({"schema": 1, "value": {"$dataclass": "os:system", "fields": {}}}),
-    "a type that is not a dataclass": lambda: _entry({"schema": 1, "value": {
-        "$dataclass": "topomatch.stages.retrieval.fusion:Fusion", "fields": {"x": 1}}}),
+    "pickle in the array blob": lambda: _entry({"schema": 2, "value": {"$array": 0}, "arrays": [["|O", [1], False, 0, 8]]},
+                                               np.array([print], dtype=object)),
+    "an object dtype in the array table": lambda: _entry({"schema": 2, "value": {"$array": 0},
+                                                         "arrays": [["|O", [1], False, 0, 8]]}),
+    "an array beyond the blob": lambda: _entry({"schema": 2, "value": {"$array": 0},
+                                                "arrays": [["<f8", [100], False, 0, 800]]}),
+    "a raw pickle": lambda: b"\x80\x04\x95" + b"cos\nsystem\n(S'touch /tmp/pwned'\ntR.",
+    "an unknown type name": lambda: _entry({"schema": 2, "value": {"$dataclass": "os:system", "fields": {}},
+                                            "arrays": []}),
+    "a dataclass with other fields": lambda: _entry({"schema": 2, "value": {
+        "$dataclass": "topomatch.stages.retrieval.fusion:Fusion", "fields": {"x": 1}}, "arrays": []}),
     "another schema": lambda: _entry({"schema": 99, "value": 1}),
-    "no metadata": lambda: _entry({"schema": 1, "value": 1})[:40],
-    "a deeply nested document": lambda: _entry('{"schema": 1, "value": ' + "[" * 100000 + "]" * 100000 + "}"),
+    "a truncated archive": lambda: _entry({"schema": 2, "value": 1, "arrays": []})[:40],
+    "a deeply nested document": lambda: _entry('{"schema": 2, "arrays": [], "value": ' + "[" * 100000 + "]" * 100000
+                                               + "}"),
 }
 
 
