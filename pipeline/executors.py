@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
+from contextlib import contextmanager
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Iterator, Sequence
 
@@ -59,7 +61,8 @@ def _local(items: Sequence[Item], cache_root: str | None, workers: int) -> Itera
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["topomatch.pipeline.item"])
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_single_threaded) as pool:
-        futures = [pool.submit(run_item, item, cache_root) for item in items]
+        with _main_script_hidden(items):
+            futures = [pool.submit(run_item, item, cache_root) for item in items]  # starts the workers
         try:
             for future in as_completed(futures):
                 yield future.result()
@@ -67,6 +70,30 @@ def _local(items: Sequence[Item], cache_root: str | None, workers: int) -> Itera
             for f in futures:
                 f.cancel()
             raise
+
+
+@contextmanager
+def _main_script_hidden(items: Sequence[Item]) -> Iterator[None]:
+    """While the workers start, hide the main script's path from multiprocessing.
+
+    A worker started by ``spawn`` or ``forkserver`` runs the parent's main script again before it
+    takes work, to find functions defined there; a user's script that calls the API
+    (``topomatch.index(...)``) without an ``if __name__ == "__main__":`` guard would then start
+    every worker's own run and crash. The workers run only the engine's ``run_item``, so they need
+    the script only when a stage was defined in it (``registry.register_module``): then nothing is
+    hidden.
+    """
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    needs_main = any(call.spec.func.__module__ == "__main__" for item in items for call in item.calls)
+    if main is None or path is None or needs_main:
+        yield
+        return
+    del main.__file__
+    try:
+        yield
+    finally:
+        main.__file__ = path
 
 
 def _dask(items: Sequence[Item], cache_root: str | None, config: ExecutorConfig) -> Iterator[ItemResult]:

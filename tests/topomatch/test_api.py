@@ -163,3 +163,15 @@ def test_skeleton_default_function_is_the_morse_stage_default(capsys):
     api = topomatch.skeleton(BUNDLED_MESHES / "torus.off")
     cli = cli_json(capsys, "skeleton", BUNDLED_MESHES / "torus.off")
     assert api.function == cli["function"] == default
+
+
+def test_a_script_without_a_main_guard_can_use_the_worker_pool(tmp_path):
+    """multiprocessing's workers re-run the parent's script unless it is guarded; the API hides it."""
+    script = tmp_path / "script.py"
+    paths = [str(BUNDLED_MESHES / n) for n in ("torus.off", "eight_genus2.off", "odedstein_hand_lowres.obj.gz")]
+    script.write_text(f"import topomatch\nprint('start')\n"
+                      f"r = topomatch.index({paths!r}, {str(tmp_path / 's.db')!r}, method='d2', workers=2)\n"
+                      f"print('indexed', r.parts[0].done)\n")
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split("\n")[:2] == ["start", "indexed 3"]
