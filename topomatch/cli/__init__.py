@@ -21,7 +21,9 @@ from topomatch.pipeline.errors import TopomatchError
 COMMANDS = (engine, skeleton, retrieval, registration)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command; with ``command``, only that command's arguments are built (the
+    others are listed by name), which keeps ``topomatch --help`` and each command's start-up cheap."""
     parser = argparse.ArgumentParser(
         prog="topomatch",
         description="Topological shape skeletons, shape matching and retrieval, and entropic image "
@@ -30,14 +32,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"topomatch {__version__}")
     parser.add_argument("--debug", action="store_true", help="show tracebacks on errors")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub.selected = command  # read by topomatch.cli.common.command
     for module in COMMANDS:
         module.add_parsers(sub)
     return parser
 
 
+def _command_name(argv: list[str]) -> str:
+    """The command named on the command line ("" when none is: the top-level help or usage)."""
+    for arg in argv:
+        if not arg.startswith("-"):
+            return arg
+    return ""
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(_command_name(argv)).parse_args(argv)
     try:
         return args.handler(args)
     except TopomatchError as exc:

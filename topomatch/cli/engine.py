@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from topomatch.cli.common import command
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.paths import DATA_ROOT_ENV
 
@@ -21,30 +22,25 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
 
 
 def add_parsers(sub) -> None:
-    p = sub.add_parser("run", help="run an experiment config", description="Run an experiment config and "
-                       "write its run folder (config, manifest, tables, figures, index.html).")
+    command(sub, "run", help="run an experiment config", description="Run an experiment config and write its run "
+            "folder (config, manifest, tables, figures, index.html).", handler=cmd_run, build=_run_arguments)
+    command(sub, "validate", help="check a config without running it", description="Validate a config: structure, "
+            "stage names, parameters, sweeps, reports, and that the input files exist.", handler=cmd_validate,
+            build=_add_config_args)
+    command(sub, "stages", help="list stages and reports with their parameters", description="List every "
+            "registered stage and report with parameters and defaults.", handler=cmd_stages,
+            build=lambda p: p.add_argument("--json", action="store_true", help="print JSON"))
+    command(sub, "configs", help="list the installed experiment configs", description="List the experiment configs "
+            "installed with topomatch (run one by its path or name: topomatch run retrieval/demo).",
+            handler=cmd_configs, build=lambda p: None)
+
+
+def _run_arguments(p: argparse.ArgumentParser) -> None:
     _add_config_args(p)
     p.add_argument("--out", metavar="DIR", default="runs", help="parent folder of run folders (default: runs)")
     p.add_argument("--cache-dir", metavar="DIR", help="stage cache (default: OUT/.cache)")
     p.add_argument("--no-cache", action="store_true", help="recompute everything, store nothing")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    p.set_defaults(handler=cmd_run)
-
-    p = sub.add_parser("validate", help="check a config without running it",
-                       description="Validate a config: structure, stage names, parameters, sweeps, "
-                                   "reports, and that the input files exist.")
-    _add_config_args(p)
-    p.set_defaults(handler=cmd_validate)
-
-    p = sub.add_parser("stages", help="list stages and reports with their parameters",
-                       description="List every registered stage and report with parameters and defaults.")
-    p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(handler=cmd_stages)
-
-    p = sub.add_parser("configs", help="list the installed experiment configs",
-                       description="List the experiment configs installed with topomatch (run one by its path "
-                                   "or name: topomatch run retrieval/demo).")
-    p.set_defaults(handler=cmd_configs)
 
 
 def cmd_run(args: argparse.Namespace) -> int:

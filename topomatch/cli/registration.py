@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 
-from topomatch.cli.output import print_result
+from topomatch.cli.common import command, print_result
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 from topomatch.pipeline.errors import TopomatchError
 
@@ -36,17 +36,20 @@ def _options() -> list[Option]:
 
 
 def add_parsers(sub) -> None:
-    p = sub.add_parser("register", help="rigidly register a moving image to a fixed image",
-                       description="Rigid 2D registration (tx, ty, angle) of MOVING to FIXED by an entropic measure "
-                                   "(Jensen-Tsallis by default, thesis ch. 2) with coarse-to-fine SPSA. Prints the "
-                                   "transform in ITK's convention: T(x) = R(angle)(x - c) + c + t, x = (column, row) "
-                                   "pixels, c = ((W-1)/2, (H-1)/2) of FIXED, moving(T(x)) ~ fixed(x).")
+    command(sub, "register", help="rigidly register a moving image to a fixed image",
+            description="Rigid 2D registration (tx, ty, angle) of MOVING to FIXED by an entropic measure "
+                        "(Jensen-Tsallis by default, thesis ch. 2) with coarse-to-fine SPSA. Prints the transform "
+                        "in ITK's convention: T(x) = R(angle)(x - c) + c + t, x = (column, row) pixels, "
+                        "c = ((W-1)/2, (H-1)/2) of FIXED, moving(T(x)) ~ fixed(x).",
+            handler=cmd_register, build=_arguments)
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("fixed", help="fixed (reference) image: PNG, TIFF, NIfTI, DICOM, MetaImage")
     p.add_argument("moving", help="moving (target) image")
     add_options(p, _models(), _options())
     p.add_argument("--out", metavar="DIR", help="write moving_resampled.png/.tif, overlay.png and registration.json")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    p.set_defaults(handler=cmd_register)
 
 
 def cmd_register(args: argparse.Namespace) -> int:

@@ -12,6 +12,7 @@ import argparse
 import json
 import sys
 
+from topomatch.cli.common import command
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 
 
@@ -53,19 +54,31 @@ def _given(args: argparse.Namespace) -> dict:
 
 
 def add_parsers(sub) -> None:
-    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, DEFAULT_PAIR_METHOD
+    command(sub, "match", help="dissimilarity of two meshes", description="Dissimilarity of two meshes by one "
+            "retrieval method; for a skeleton method also the endpoint correspondence.", handler=cmd_match,
+            build=_match_arguments)
+    command(sub, "index", help="index a collection of meshes", description="Compute descriptors of meshes and store "
+            "them in a SQLite index; unchanged meshes are skipped.", handler=cmd_index, build=_index_arguments)
+    command(sub, "query", help="closest indexed shapes to a mesh", description="Rank the indexed shapes by "
+            "dissimilarity to a query mesh.", handler=cmd_query, build=_query_arguments)
+    command(sub, "evaluate", help="retrieval metrics of a labelled index", description="Full dissimilarity matrix "
+            "of the labelled shapes of an index, PSB metrics (NN, FT, ST, E, DCG, mAP).", handler=cmd_evaluate,
+            build=_evaluate_arguments)
 
-    p = sub.add_parser("match", help="dissimilarity of two meshes", description="Dissimilarity of two meshes "
-                       "by one retrieval method; for a skeleton method also the endpoint correspondence.")
+
+def _match_arguments(p: argparse.ArgumentParser) -> None:
+    from topomatch.stages.retrieval.catalogue import DEFAULT_PAIR_METHOD
+
     p.add_argument("a", help="first mesh")
     p.add_argument("b", help="second mesh")
     _method_arg(p, DEFAULT_PAIR_METHOD)
     _with_match_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(handler=cmd_match)
 
-    p = sub.add_parser("index", help="index a collection of meshes", description="Compute descriptors of meshes "
-                       "and store them in a SQLite index; unchanged meshes are skipped.")
+
+def _index_arguments(p: argparse.ArgumentParser) -> None:
+    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
+
     p.add_argument("paths", nargs="+", help="mesh files or folders (searched recursively)")
     p.add_argument("--db", required=True, help="index file (SQLite), created if missing")
     _method_arg(p, DEFAULT_METHOD)
@@ -74,26 +87,27 @@ def add_parsers(sub) -> None:
     add_options(p, _models(), EXECUTOR_OPTIONS)
     p.add_argument("--retry-failed", action="store_true", help="recompute meshes recorded as failed")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    p.set_defaults(handler=cmd_index)
 
-    p = sub.add_parser("query", help="closest indexed shapes to a mesh", description="Rank the indexed shapes "
-                       "by dissimilarity to a query mesh.")
+
+def _query_arguments(p: argparse.ArgumentParser) -> None:
+    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
+
     p.add_argument("mesh", help="query mesh")
     p.add_argument("--db", required=True, help="index file")
     p.add_argument("-k", type=int, default=10, help="results to show (default 10)")
     _method_arg(p, DEFAULT_METHOD)
     _with_match_options(p)
     p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(handler=cmd_query)
 
-    p = sub.add_parser("evaluate", help="retrieval metrics of a labelled index", description="Full dissimilarity "
-                       "matrix of the labelled shapes of an index, PSB metrics (NN, FT, ST, E, DCG, mAP).")
+
+def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
+    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
+
     p.add_argument("--db", required=True, help="index file")
     _method_arg(p, DEFAULT_METHOD)
     _with_match_options(p)
     p.add_argument("--out", help="where to write the matrix (.npz; default next to the index)")
     p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(handler=cmd_evaluate)
 
 
 def cmd_match(args: argparse.Namespace) -> int:

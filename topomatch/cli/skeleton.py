@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import argparse
 
-from topomatch.cli.output import print_result
+from topomatch.cli.common import command, print_result
 from topomatch.pipeline.cli_options import add_options, given_options
 
 
@@ -24,16 +24,19 @@ def _models() -> dict:
 
 
 def add_parsers(sub) -> None:
+    command(sub, "skeleton", help="compute the Reeb-graph skeleton of one mesh",
+            description="Compute the Reeb-graph skeleton of one mesh (load, clean to the largest component, "
+                        "Morse function, level sets, Reeb graph, prune) and print its counts.",
+            handler=cmd_skeleton, build=_arguments)
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.skeletons import SKELETON_OPTIONS
 
-    p = sub.add_parser("skeleton", help="compute the Reeb-graph skeleton of one mesh",
-                       description="Compute the Reeb-graph skeleton of one mesh (load, clean to the largest "
-                                   "component, Morse function, level sets, Reeb graph, prune) and print its counts.")
     p.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL, optionally .gz)")
     add_options(p, _models(), SKELETON_OPTIONS)
     p.add_argument("--out", metavar="DIR", help="write skeleton.graphml/.json/.obj, reeb.graphml and skeleton.png")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
-    p.set_defaults(handler=cmd_skeleton)
 
 
 def cmd_skeleton(args: argparse.Namespace) -> int:
