@@ -3,15 +3,12 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 from PIL import Image as PILImage
 
 from topomatch.cli import main
-from topomatch.pipeline.config import load_experiment
-from topomatch.pipeline.runner import run_experiment
 from tests_paths import REPO_ROOT
 
 CONFIGS = REPO_ROOT / "configs" / "registration"

@@ -5,9 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import numpy as np
 import pytest
-from PIL import Image as PILImage
 
 from topomatch.pipeline.config import load_experiment
 from topomatch.pipeline.runner import run_experiment
