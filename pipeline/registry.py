@@ -77,20 +77,20 @@ def register_module(module) -> None:
 
 def get_stage(name: str) -> StageSpec:
     """The stage called ``name``; a :class:`ConfigError` listing the known names otherwise."""
-    discover()
-    try:
-        return STAGES[name]
-    except KeyError:
-        raise ConfigError(f"unknown stage {name!r}; known stages: {', '.join(sorted(STAGES))}") from None
+    return _lookup(STAGES, "stage", name)
 
 
 def get_report(name: str) -> ReportSpec:
     """The report called ``name``; a :class:`ConfigError` listing the known names otherwise."""
+    return _lookup(REPORTS, "report", name)
+
+
+def _lookup(table: dict, kind: str, name: str):
     discover()
     try:
-        return REPORTS[name]
+        return table[name]
     except KeyError:
-        raise ConfigError(f"unknown report {name!r}; known reports: {', '.join(sorted(REPORTS))}") from None
+        raise ConfigError(f"unknown {kind} {name!r}; known {kind}s: {', '.join(sorted(table))}") from None
 
 
 def type_label(hint: Any) -> str:
