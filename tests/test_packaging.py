@@ -4,6 +4,7 @@ working from any folder."""
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -17,8 +18,11 @@ from tests_paths import REPO_ROOT
 def installed(tmp_path_factory):
     """The wheel built from this checkout, unpacked (what pip installs into site-packages)."""
     out = tmp_path_factory.mktemp("wheel")
+    source = out / "source"  # a copy: setuptools builds in the source tree (build/, *.egg-info)
+    shutil.copytree(REPO_ROOT, source, ignore=shutil.ignore_patterns(
+        ".git", ".venv", "runs", "build", "dist", "*.egg-info", "__pycache__", ".pytest_cache", ".ruff_cache"))
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out),
-                    str(REPO_ROOT)], check=True, capture_output=True, timeout=600)
+                    str(source)], check=True, capture_output=True, timeout=600)
     (wheel,) = out.glob("topomatch-*.whl")
     site = out / "site"
     with zipfile.ZipFile(wheel) as z:
