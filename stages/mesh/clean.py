@@ -176,10 +176,31 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     """Mask of faces (m, 3) whose vertex set equals that of an earlier face (any order or orientation)."""
     if F.shape[0] == 0:
         return np.zeros(0, dtype=bool)
-    _, first = np.unique(np.sort(F, axis=1), axis=0, return_index=True)
+    S = np.sort(F, axis=1)
+    n = int(S[:, 2].max()) + 1
+    if n ** 3 < 2 ** 63:  # one int64 key per face: a stable sort keeps the first of equal faces first
+        key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]
+        order = np.argsort(key, kind="stable")
+        sorted_key = key[order]
+        dup = np.zeros(F.shape[0], dtype=bool)
+        dup[order[1:][sorted_key[1:] == sorted_key[:-1]]] = True
+        return dup
+    _, first = np.unique(S, axis=0, return_index=True)
     dup = np.ones(F.shape[0], dtype=bool)
     dup[first] = False
     return dup
+
+
+def _face_components(F: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
+    """(number of connected components, (m,) component of each face) of a mesh without unreferenced
+    vertices; components are numbered by their smallest vertex, as ``igl.vertex_components`` numbers them."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    u, w = F.ravel(), F[:, [1, 2, 0]].ravel()
+    count, labels = connected_components(coo_matrix((np.ones(u.size, dtype=bool), (u, w)),
+                                                    shape=(n_vertices, n_vertices)), directed=False)
+    return int(count), np.asarray(labels, dtype=np.int64)[F[:, 0]]
 
 
 def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
@@ -203,14 +224,14 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
         components with ``components='fail'``, non-manifold elements with
         ``fail_on_nonmanifold=True``.
     """
-    import igl
-
     params = params or CleanParams()
     before = topology_report(mesh)
     if mesh.n_faces == 0:
         raise InputError(mesh.name, "mesh has no faces")
 
-    V, F = _remove_unreferenced(mesh.V, mesh.F)
+    V, F = mesh.V, mesh.F
+    if before.n_unreferenced_vertices:
+        V, F = _remove_unreferenced(V, F)
     unreferenced = mesh.n_vertices - V.shape[0]
 
     n_before = V.shape[0]
@@ -221,26 +242,29 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     if params.drop_degenerate:
         bad = degenerate_faces(V, F)
         n_degenerate = int(bad.sum())
-        F = F[~bad]
+        if n_degenerate:
+            F = F[~bad]
     if params.drop_duplicate_faces:
         dup = duplicate_faces(F)
         n_duplicate = int(dup.sum())
-        F = F[~dup]
+        if n_duplicate:
+            F = F[~dup]
     if F.shape[0] == 0:
         raise InputError(mesh.name, f"no faces left after cleaning ({n_degenerate} degenerate and "
                                     f"{n_duplicate} duplicated faces of {mesh.n_faces} were dropped)")
-    n_before = V.shape[0]
-    V, F = _remove_unreferenced(V, F)
-    unreferenced += n_before - V.shape[0]
+    if n_degenerate or n_duplicate:
+        n_before = V.shape[0]
+        V, F = _remove_unreferenced(V, F)
+        unreferenced += n_before - V.shape[0]
 
-    labels = np.asarray(igl.vertex_components(F), dtype=np.int64)
-    face_label = labels[F[:, 0]]
-    n_components = int(labels.max()) + 1
+    unchanged = V is mesh.V and F is mesh.F  # nothing was repaired: the topology is the one measured
+    n_components = before.n_components if unchanged else _face_components(F, V.shape[0])[0]
     dropped_components = dropped_faces = dropped_vertices = 0
     if n_components > 1 and params.components == "fail":
         raise InputError(mesh.name, f"mesh has {n_components} connected components; "
                                     "pass clean.components=largest or clean.components=keep_all")
     if n_components > 1 and params.components == "largest":
+        _, face_label = _face_components(F, V.shape[0])
         keep = int(np.argmax(np.bincount(face_label, minlength=n_components)))
         mask = face_label == keep
         dropped_components = n_components - 1
@@ -248,8 +272,9 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
         n_before = V.shape[0]
         V, F = _remove_unreferenced(V, F[mask])
         dropped_vertices = n_before - V.shape[0]
+        unchanged = False
 
-    after = topology_report(Mesh(V, F, name=mesh.name))
+    after = before if unchanged else topology_report(Mesh(V, F, name=mesh.name))
     cleaned = Mesh(V, F, name=mesh.name, closed_manifold=after.is_closed and after.n_nonmanifold_edges == 0)
     if params.fail_on_nonmanifold and not after.is_manifold:
         raise InputError(mesh.name, f"mesh has {after.n_nonmanifold_edges} non-manifold edges and "

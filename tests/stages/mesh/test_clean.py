@@ -155,3 +155,26 @@ def test_clean_records_closedness_and_moves_keep_it(bundled_mesh):
     opened = clean_mesh(half, CleanParams(components="largest")).mesh
     assert opened.closed_manifold is False and not is_closed_manifold(opened.F)
     assert Mesh(torus.V, torus.F).closed_manifold is None  # unknown unless clean said so
+
+
+def test_a_clean_mesh_is_passed_through_with_one_topology_report(bundled_mesh, monkeypatch):
+    """Nothing to repair: the same arrays come back, and the topology is measured once (before = after)."""
+    import topomatch.stages.mesh.clean as clean_module
+
+    mesh = bundled_mesh("eight_genus2.off")
+    calls = []
+    real = clean_module.topology_report
+    monkeypatch.setattr(clean_module, "topology_report", lambda m: calls.append(m) or real(m))
+    result = clean_module.clean_mesh(mesh, clean_module.CleanParams(components="largest"))
+    assert result.mesh.V is mesh.V and result.mesh.F is mesh.F
+    assert result.after is result.before and len(calls) == 1
+    assert result.after.genus == 2 and result.mesh.closed_manifold
+
+
+def test_duplicate_faces_keep_the_first_occurrence():
+    from topomatch.stages.mesh.clean import duplicate_faces
+
+    F = np.array([[0, 1, 2], [2, 3, 4], [2, 1, 0], [1, 2, 0], [4, 3, 2], [5, 6, 7]])
+    np.testing.assert_array_equal(duplicate_faces(F), [False, False, True, True, True, False])
+    big = np.array([[0, 1, 2], [3_000_000, 1, 2], [2, 1, 3_000_000]])  # keys beyond int64: the row-wise path
+    np.testing.assert_array_equal(duplicate_faces(big), [False, False, True])

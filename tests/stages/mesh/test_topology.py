@@ -137,3 +137,19 @@ def test_nonmanifold_vertices_agree_with_libigl(bundled_mesh):
         expected = ~np.asarray(igl.is_vertex_manifold(faces), dtype=bool)
         np.testing.assert_array_equal(nonmanifold_vertices(faces, n), expected[:n])
     assert nonmanifold_vertices(bowtie, 9)[0] and nonmanifold_vertices(bowtie, 9).sum() == 1
+
+
+def test_inconsistently_oriented_faces_are_still_orientable(bundled_mesh):
+    """Flipping half the faces breaks the orientation but not orientability (the bfs_orient fallback)."""
+    torus = bundled_mesh("torus.off")
+    F = torus.F.copy()
+    F[::2] = F[::2, ::-1]
+    r = topology_report(Mesh(torus.V, F))
+    assert r.is_orientable and r.genus == 1
+
+
+def test_unreferenced_vertices_do_not_count(bundled_mesh):
+    torus = bundled_mesh("torus.off")
+    V = np.vstack([np.zeros((3, 3)), torus.V])  # three unused vertices first: every index shifts
+    r = topology_report(Mesh(V, torus.F + 3))
+    assert r.n_unreferenced_vertices == 3 and r.euler_characteristic == 0 and r.genus == 1
