@@ -16,11 +16,12 @@ dtype, shape, memory order and place in the blob. :func:`loads` reads it back wi
   keys and each edge attribute as one array where the values allow it (numbers of one type,
   arrays of one shape, 1-D arrays of one dtype concatenated), so a Reeb graph of hundreds of
   nodes is a dozen arrays, not hundreds of JSON objects;
-- dataclasses, named tuples, enums and pydantic models **of a registered type**: the types that
-  the engine found in the scanned stage modules (:func:`register_types`, called by
-  :func:`topomatch.pipeline.registry.discover`). A type is named ``module:QualName`` in the
-  document, but a name is only looked up in that table, never imported: data can select which
-  of the project's own result types to build, nothing else.
+- dataclasses, named tuples, enums and pydantic models **of an allowed package**: defined in a
+  module of the packages the registry scans (``topomatch.stages``) or of a module registered
+  explicitly (:func:`allow_packages`). A type is named ``module:QualName`` in the
+  document; on reading, the module must already be imported (it is, when the stage that returns
+  the type is in the chain): a name is looked up, never imported, so data can select which of
+  the project's own result types to build, nothing else.
 
 Anything else cannot be written (:class:`CodecError`: the runner then keeps the result in memory
 and does not cache it). A document of another schema version, a damaged archive, an unknown
@@ -36,8 +37,9 @@ import enum
 import io
 import json
 import math
+import sys
 from pathlib import Path, PurePath
-from typing import Any, Iterable
+from typing import Any
 
 import numpy as np
 
@@ -48,6 +50,7 @@ SCHEMA_VERSION = 2
 _ALIGN = 16
 
 _TYPES: dict[str, type] = {}
+_ALLOWED: set[str] = set()  # packages (and modules) whose types may be stored
 
 
 class CodecError(ValueError):
@@ -70,18 +73,35 @@ def _is_model(cls: type) -> bool:
     return isinstance(cls, type) and issubclass(cls, BaseModel)
 
 
-def register_types(modules: Iterable[Any]) -> None:
-    """Allow the dataclasses, named tuples, enums and pydantic models defined in ``modules``."""
-    for module in modules:
-        for obj in vars(module).values():
-            if (isinstance(obj, type) and obj.__module__ == module.__name__
-                    and (dataclasses.is_dataclass(obj) or _is_namedtuple(obj) or issubclass(obj, enum.Enum)
-                         or _is_model(obj))):
-                _TYPES[type_name(obj)] = obj
+def allow_packages(names) -> None:
+    """Allow the storable types defined in these packages (and their sub-packages) or modules."""
+    _ALLOWED.update(names)
+
+
+def _storable(obj: Any) -> bool:
+    return isinstance(obj, type) and (dataclasses.is_dataclass(obj) or _is_namedtuple(obj)
+                                      or issubclass(obj, enum.Enum) or _is_model(obj))
+
+
+def _lookup(name: Any) -> type | None:
+    """The storable class ``module:QualName`` if its module is allowed and already imported."""
+    cls = _TYPES.get(name) if isinstance(name, str) else None
+    if cls is not None or not isinstance(name, str) or ":" not in name:
+        return cls
+    module_name, qualname = name.split(":", 1)
+    if not any(module_name == p or module_name.startswith(p + ".") for p in _ALLOWED) or "<" in qualname:
+        return None
+    obj = sys.modules.get(module_name)  # never imported here
+    for part in qualname.split("."):
+        obj = getattr(obj, part, None) if obj is not None else None
+    if _storable(obj) and obj.__module__ == module_name and obj.__qualname__ == qualname:
+        _TYPES[name] = obj
+        return obj
+    return None
 
 
 def registered(cls: type) -> bool:
-    return _TYPES.get(type_name(cls)) is cls
+    return _lookup(type_name(cls)) is cls
 
 
 # --------------------------------------------------------------------------- encoding
@@ -194,7 +214,7 @@ class _Encoder:
     @staticmethod
     def known(cls: type) -> str:
         name = type_name(cls)
-        if _TYPES.get(name) is not cls:
+        if _lookup(name) is not cls:
             raise CodecError(f"type {name} is not registered (only types of the scanned stage modules are stored)")
         return name
 
@@ -344,7 +364,7 @@ class _Decoder:
 
     @staticmethod
     def known(name: Any, base: type | None) -> type:
-        cls = _TYPES.get(name) if isinstance(name, str) else None
+        cls = _lookup(name)
         if cls is None or (base is not None and not issubclass(cls, base)):
             raise CodecError(f"unknown type {name!r}")
         return cls

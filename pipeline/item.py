@@ -25,7 +25,6 @@ from topomatch.pipeline.config import Item, StageCall, check_chain, resolve_chai
 from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.errors import InputError, TopomatchError
 from topomatch.pipeline.files import check_readable_file
-from topomatch.pipeline.registry import discover
 
 
 @dataclass
@@ -72,7 +71,6 @@ class ItemResult:
 
 def run_item(item: Item, cache_root: str | None) -> ItemResult:
     """Run ``item``'s stage chain from its input files; see :func:`run_chain`."""
-    discover()
     out = ItemResult(item.item_id, item.input_path, dict(item.sweep), item.input_label)
     state: dict[str, tuple[Any, str | None]] = {}
     for key, path in (item.paths or {"path": item.input_path}).items():
@@ -99,7 +97,6 @@ def run_stages(chain: list[Any] | tuple[Any, ...], *, paths: dict[str, str | Pat
     InputError
         An input file that cannot be read.
     """
-    discover()
     paths, values = dict(paths or {}), dict(values or {})
     calls = resolve_chain(chain)
     check_chain(calls, set(paths) | set(values))
