@@ -19,10 +19,11 @@ import typing
 from dataclasses import dataclass
 from typing import Annotated, Any, Mapping, Sequence
 
-from pydantic import BaseModel, TypeAdapter, ValidationError
-from pydantic.fields import FieldInfo
-
 from topomatch.pipeline.errors import ConfigError
+
+if typing.TYPE_CHECKING:  # pydantic is imported when options are built: `topomatch --help` does not pay for it
+    from pydantic import BaseModel
+    from pydantic.fields import FieldInfo
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,8 @@ def _option(spec: str | Option) -> Option:
 
 def field_of(models: Mapping[str, type[BaseModel]], path: str) -> tuple[FieldInfo, Any]:
     """The pydantic field at ``path`` and its resolved annotation."""
+    from pydantic import BaseModel
+
     head, *rest = path.split(".")
     model: Any = models[head]
     info, hint = None, None
@@ -105,6 +108,8 @@ def given_options(args: argparse.Namespace, models: Mapping[str, type[BaseModel]
     ConfigError
         A value the field rejects; the message names the option.
     """
+    from pydantic import TypeAdapter, ValidationError
+
     out: dict[str, dict[str, Any]] = {}
     for spec in map(_option, specs):
         if not hasattr(args, spec.dest):
