@@ -83,11 +83,13 @@ def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generato
     counts = rng.multinomial(n, areas / areas.sum())
     face = np.repeat(np.arange(F.shape[0]), counts)
     r = rng.random((2, n))
+    if shuffle:  # the same points as shuffling them afterwards, with smaller gathers
+        order = rng.permutation(n)
+        face, r = face[order], r[:, order]
     s = np.sqrt(r[0])
-    T = V[F[face]]  # (n, 3 corners, 3)
-    P = ((1.0 - s)[:, None] * T[:, 0] + (s * (1.0 - r[1]))[:, None] * T[:, 1]
-         + (s * r[1])[:, None] * T[:, 2])
-    return P[rng.permutation(n)] if shuffle else P
+    corners = F[face]  # (n, 3)
+    return ((1.0 - s)[:, None] * V[corners[:, 0]] + (s * (1.0 - r[1]))[:, None] * V[corners[:, 1]]
+            + (s * r[1])[:, None] * V[corners[:, 2]])
 
 
 def area_centroid_and_rms_radius(V: np.ndarray, F: np.ndarray, areas: np.ndarray | None = None
