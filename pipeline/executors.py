@@ -22,7 +22,7 @@ from typing import Iterator, Sequence
 
 from topomatch.pipeline.config import ExecutorConfig, Item
 from topomatch.pipeline.errors import ConfigError
-from topomatch.pipeline.item import ItemResult, run_item
+from topomatch.pipeline.item import ItemResult, run_items
 
 
 def default_workers() -> int:
@@ -31,10 +31,19 @@ def default_workers() -> int:
 
 def execute(items: Sequence[Item], cache_root: str | None, config: ExecutorConfig) -> Iterator[ItemResult]:
     """Run every item; yield results in completion order."""
+    for results in execute_groups([[item] for item in items], cache_root, config):
+        yield from results
+
+
+def execute_groups(groups: Sequence[Sequence[Item]], cache_root: str | None,
+                   config: ExecutorConfig) -> Iterator[list[ItemResult]]:
+    """Run every group of items in one worker (:func:`~topomatch.pipeline.item.run_items`: a stage result
+    shared by items of a group is computed once and kept in memory); yield each group's results in
+    completion order. The unit of parallelism is the group (e.g. one mesh and every part method)."""
     if config.kind == "dask":
-        yield from _dask(items, cache_root, config)
+        yield from _dask(groups, cache_root, config)
     else:
-        yield from _local(items, cache_root, config.workers or default_workers())
+        yield from _local(groups, cache_root, config.workers or default_workers())
 
 
 def _single_threaded() -> None:
@@ -52,17 +61,17 @@ def _single_threaded() -> None:
     threadpool_limits(limits=1)
 
 
-def _local(items: Sequence[Item], cache_root: str | None, workers: int) -> Iterator[ItemResult]:
-    workers = min(workers, len(items))
+def _local(groups: Sequence[Sequence[Item]], cache_root: str | None, workers: int) -> Iterator[list[ItemResult]]:
+    workers = min(workers, len(groups))
     if workers <= 1:
-        for item in items:
-            yield run_item(item, cache_root)
+        for group in groups:
+            yield run_items(group, cache_root)
         return
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["topomatch.pipeline.item"])
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_single_threaded) as pool:
-        with _main_script_hidden(items):
-            futures = [pool.submit(run_item, item, cache_root) for item in items]  # starts the workers
+        with _main_script_hidden([item for group in groups for item in group]):
+            futures = [pool.submit(run_items, group, cache_root) for group in groups]  # starts the workers
         try:
             for future in as_completed(futures):
                 yield future.result()
@@ -79,7 +88,7 @@ def _main_script_hidden(items: Sequence[Item]) -> Iterator[None]:
     A worker started by ``spawn`` or ``forkserver`` runs the parent's main script again before it
     takes work, to find functions defined there; a user's script that calls the API
     (``topomatch.index(...)``) without an ``if __name__ == "__main__":`` guard would then start
-    every worker's own run and crash. The workers run only the engine's ``run_item``, so they need
+    every worker's own run and crash. The workers run only the engine's ``run_items``, so they need
     the script only when a stage was defined in it (``registry.register_module``): then nothing is
     hidden.
     """
@@ -96,7 +105,8 @@ def _main_script_hidden(items: Sequence[Item]) -> Iterator[None]:
         main.__file__ = path
 
 
-def _dask(items: Sequence[Item], cache_root: str | None, config: ExecutorConfig) -> Iterator[ItemResult]:
+def _dask(groups: Sequence[Sequence[Item]], cache_root: str | None,
+          config: ExecutorConfig) -> Iterator[list[ItemResult]]:
     try:
         from dask.distributed import Client, LocalCluster, as_completed as dask_completed
     except ImportError as exc:  # pragma: no cover - dask is a dependency
@@ -117,7 +127,7 @@ def _dask(items: Sequence[Item], cache_root: str | None, config: ExecutorConfig)
         client = Client(cluster)
         client.run(_single_threaded)
     try:
-        futures = [client.submit(run_item, item, cache_root, pure=False) for item in items]
+        futures = [client.submit(run_items, list(group), cache_root, pure=False) for group in groups]
         for future in dask_completed(futures):
             yield future.result()
     finally:

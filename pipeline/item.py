@@ -69,7 +69,7 @@ class ItemResult:
         return row
 
 
-def run_item(item: Item, cache_root: str | None) -> ItemResult:
+def run_item(item: Item, cache_root: str | None, memo: dict[str, Any] | None = None) -> ItemResult:
     """Run ``item``'s stage chain from its input files; see :func:`run_chain`."""
     out = ItemResult(item.item_id, item.input_path, dict(item.sweep), item.input_label)
     state: dict[str, tuple[Any, str | None]] = {}
@@ -81,8 +81,17 @@ def run_item(item: Item, cache_root: str | None) -> ItemResult:
             return out
     for key, value in item.values.items():
         state[key] = (value, hashlib.sha256(json.dumps(value, sort_keys=True, default=str).encode()).hexdigest())
-    run_chain(item.calls, state, Cache(cache_root), out)
+    run_chain(item.calls, state, Cache(cache_root), out, memo)
     return out
+
+
+def run_items(items: list[Item], cache_root: str | None) -> list[ItemResult]:
+    """Run several items in turn, sharing their stage results in memory: a stage whose cache key
+    an earlier item of the list already computed (the same input, params and upstream chain) is
+    reused, not recomputed nor read back from the cache (e.g. the load, clean, decimate and spectrum
+    that every part method of a fusion starts with)."""
+    memo: dict[str, Any] = {}
+    return [run_item(item, cache_root, memo) for item in items]
 
 
 def run_stages(chain: list[Any] | tuple[Any, ...], *, paths: dict[str, str | Path] | None = None,
@@ -114,8 +123,9 @@ def run_stages(chain: list[Any] | tuple[Any, ...], *, paths: dict[str, str | Pat
 
 
 def run_chain(calls: tuple[StageCall, ...] | list[StageCall], state: dict[str, tuple[Any, str | None]],
-              cache: Cache, out: ItemResult) -> None:
-    """Run ``calls`` on ``state`` ({entry: (value, cache key or None)}), recording into ``out``.
+              cache: Cache, out: ItemResult, memo: dict[str, Any] | None = None) -> None:
+    """Run ``calls`` on ``state`` ({entry: (value, cache key or None)}), recording into ``out``;
+    ``memo`` ({cache key: result}) holds results already computed in this process.
 
     A :class:`TopomatchError` or any other exception inside a stage stops the chain and is
     recorded in ``out`` (the results of earlier stages are kept); ``KeyboardInterrupt``
@@ -128,7 +138,10 @@ def run_chain(calls: tuple[StageCall, ...] | list[StageCall], state: dict[str, t
         out.keys[call.label] = key or ""
         out.stage_produces[call.label] = spec.produces
         t0 = time.perf_counter()
-        hit, result = cache.get(key, functools.partial(_unusable, spec)) if key else (False, None)
+        if memo is not None and key in memo:
+            hit, result = True, memo[key]
+        else:
+            hit, result = cache.get(key, functools.partial(_unusable, spec)) if key else (False, None)
         if not hit:
             try:
                 result = spec.run({k: state[k][0] for k in spec.consumes}, call.params)
@@ -141,6 +154,8 @@ def run_chain(calls: tuple[StageCall, ...] | list[StageCall], state: dict[str, t
                 return
             if key:
                 cache.put(key, result)
+        if key and memo is not None:
+            memo[key] = result
         out.seconds[call.label] = time.perf_counter() - t0
         out.cache_hits[call.label] = hit
         out.results[call.label] = result

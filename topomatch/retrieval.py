@@ -193,9 +193,9 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
           progress: bool = False) -> IndexReport:
     """Index every mesh file of ``paths`` (files or folders) into the shape index ``db``.
 
-    Every part method of ``method`` runs in one pass of the executor, part by part, so the stages
-    they share (load, clean, decimate, spectrum) are computed once and read from the index's stage
-    cache afterwards. Unchanged meshes (same content, method and parameters) are skipped.
+    One work unit per mesh runs every part method of ``method`` on it, so the stages the parts
+    share (load, clean, decimate, spectrum) are computed once, in memory, and the workers share out
+    the meshes. Unchanged meshes (same content, method and parameters) are skipped.
 
     Raises
     ------
@@ -217,7 +217,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     hashes = {str(f): hash_file(f) for f in files}
     t0 = time.perf_counter()
     plans: dict[str, tuple[PartReport, dict]] = {}
-    todo = []
+    todo: dict[str, list] = {}  # mesh -> its part items: one work unit, the shared stages computed once
     with ShapeIndex(db_path) as store:
         for part in get_method(method).parts:
             experiment = method_experiment(part, files, workers=workers, executor=executor)
@@ -226,21 +226,24 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
             mine = [dataclasses.replace(item, item_id=f"{part}/{item.item_id}") for item in experiment.items()
                     if hashes[item.input_path] not in known]
             plans[part] = (PartReport(part, phash, len(mine)), params)
-            todo += mine
-        with tqdm(total=len(todo), desc=f"index {method}", unit="item", disable=not progress) as bar:
-            for r in executors.execute(todo, cache_dir(db_path), experiment.raw.executor):
-                part = r.item_id.split("/", 1)[0]
-                report, params = plans[part]
-                d = r.final("descriptor")
-                store.put(content_hash=hashes[r.input_path], path=r.input_path, label=label_of.get(r.input_path),
-                          method=part, params_hash=report.params_hash, params=params,
-                          status="ok" if r.ok else "failed", reason=r.error,
-                          n_endpoints=None if d is None else d.n_endpoints, kind=None if d is None else d.kind,
-                          descriptor=None if d is None else d.data, seconds=sum(r.seconds.values()))
-                report.done += r.ok
-                report.failed += not r.ok
-                report.seconds += sum(r.seconds.values())
-                bar.update()
+            for item in mine:
+                todo.setdefault(item.input_path, []).append(item)
+        n_items = sum(map(len, todo.values()))
+        with tqdm(total=n_items, desc=f"index {method}", unit="item", disable=not progress) as bar:
+            for group in executors.execute_groups(list(todo.values()), cache_dir(db_path), experiment.raw.executor):
+                for r in group:
+                    part = r.item_id.split("/", 1)[0]
+                    report, params = plans[part]
+                    d = r.final("descriptor")
+                    store.put(content_hash=hashes[r.input_path], path=r.input_path, label=label_of.get(r.input_path),
+                              method=part, params_hash=report.params_hash, params=params,
+                              status="ok" if r.ok else "failed", reason=r.error,
+                              n_endpoints=None if d is None else d.n_endpoints, kind=None if d is None else d.kind,
+                              descriptor=None if d is None else d.data, seconds=sum(r.seconds.values()))
+                    report.done += r.ok
+                    report.failed += not r.ok
+                    report.seconds += sum(r.seconds.values())
+                    bar.update()
         if label_of:
             store.set_labels(label_of)
         for report, _ in plans.values():

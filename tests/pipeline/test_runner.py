@@ -174,3 +174,21 @@ def _blas_threads_in_worker():
     from threadpoolctl import threadpool_info
 
     return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_items_run_together_compute_their_shared_stages_once(small_config):
+    """run_items: two chains on one mesh that share load -> clean -> test_interrupt compute that
+    prefix once, in memory, even without a cache."""
+    from topomatch.pipeline.item import run_items
+
+    small_config["sweep"] = {}
+    small_config["inputs"]["meshes"] = small_config["inputs"]["meshes"][:1]
+    small_config["stages"] = ["load", {"clean": {}}, {"test_interrupt": {"fail_on": "nothing"}}, "measures"]
+    (a,) = build_experiment(small_config).items()
+    small_config["stages"][3] = {"noise": {"sigma": 0.01, "seed": 1}}
+    (b,) = build_experiment(small_config).items()
+    CALLS.clear()
+    first, second = run_items([a, b], None)
+    assert CALLS == ["torus"]  # the shared stage ran once
+    assert second.cache_hits["load"] and second.cache_hits["test_interrupt"] and not second.cache_hits["noise"]
+    assert second.results["clean"] is first.results["clean"]

@@ -74,19 +74,19 @@ def test_interrupted_index_resumes(collection, tmp_path, capsys, monkeypatch):
 
     db = tmp_path / "index.db"
 
-    original = ex.execute
+    original = ex.execute_groups
 
-    def interrupted(items, cache, config):
-        for i, result in enumerate(original(items, cache, config)):
+    def interrupted(groups, cache, config):  # Ctrl-C after three meshes
+        for i, results in enumerate(original(groups, cache, config)):
             if i == 3:
                 raise KeyboardInterrupt
-            yield result
+            yield results
 
-    monkeypatch.setattr(ex, "execute", interrupted)
+    monkeypatch.setattr(ex, "execute_groups", interrupted)
     code, _, err = run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
     assert code == 130
     assert sqlite3.connect(db).execute("SELECT COUNT(*) FROM shapes").fetchone()[0] == 3
-    monkeypatch.setattr(ex, "execute", original)
+    monkeypatch.setattr(ex, "execute_groups", original)
     code, out, _ = run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
     assert "3 indexed, 0 failed, 3 unchanged" in out
 
