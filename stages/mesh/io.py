@@ -1,17 +1,18 @@
 """Reading triangle meshes: OFF, OBJ, PLY, STL and the gzip of each.
 
-libigl's ``read_triangle_mesh`` is the reader; open3d is the fallback for the PLY
-and STL variants libigl cannot read. Gzipped files are decompressed to a
-temporary file with the inner suffix. Every failure becomes an
-:class:`~topomatch.pipeline.errors.InputError` naming the file and the problem.
+The file's structure is checked first (:mod:`topomatch.stages.mesh.file_checks`: header counts
+against the file, faces of at least three vertices, a decompression cap), then libigl's
+``read_triangle_mesh`` reads it; open3d is the fallback only for the PLY and STL variants libigl
+cannot read, never for a file libigl rejects as malformed (a lenient reader would drop data), and
+its result must match the header's counts. Polygons are triangulated as fans and counted in the
+result. Gzipped files are decompressed to a temporary file with the inner suffix. Every failure
+becomes an :class:`~topomatch.pipeline.contract.InputError` naming the file and the problem.
 """
 
 from __future__ import annotations
 
 import contextlib
-import gzip
 import os
-import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import InputError, Params, StageResult, check_readable_file, stage
+from topomatch.stages.mesh.file_checks import FileFacts, check_structure, plain_file
 from topomatch.stages.mesh.mesh import Mesh
 
 SUPPORTED_SUFFIXES = (".off", ".obj", ".ply", ".stl")
@@ -29,19 +31,23 @@ SUPPORTED_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 class LoadParams(Params):
     """Parameters of :func:`load`."""
 
-    reader: Literal["auto", "igl", "open3d"] = Field("auto", description="mesh reader: libigl first then open3d (auto), or only one")
+    reader: Literal["auto", "igl", "open3d"] = Field(
+        "auto", description="mesh reader: libigl, then open3d for PLY and STL files libigl cannot read (auto), "
+                            "or only one")
 
 
 @dataclass(frozen=True, eq=False)
 class LoadResult(StageResult):
-    """A mesh read from ``path``."""
+    """A mesh read from ``path``; ``polygons``: faces of more than three vertices, triangulated as fans."""
 
     mesh: Mesh
     path: str
     reader: str
+    polygons: int = 0
 
     def summary(self) -> dict:
-        return {"vertices": self.mesh.n_vertices, "faces": self.mesh.n_faces, "reader": self.reader}
+        return {"vertices": self.mesh.n_vertices, "faces": self.mesh.n_faces, "reader": self.reader,
+                "polygons_triangulated": self.polygons}
 
 
 def mesh_format(path: str | Path) -> str:
@@ -54,22 +60,6 @@ def mesh_format(path: str | Path) -> str:
         raise InputError(path, f"unsupported mesh format {fmt or '(no suffix)'!r}; expected one of "
                                f"{', '.join(SUPPORTED_SUFFIXES)} (optionally gzipped)")
     return fmt
-
-
-@contextlib.contextmanager
-def _plain_file(path: Path, fmt: str) -> Iterator[Path]:
-    """Yield a path to the uncompressed content of ``path``."""
-    if path.suffix.lower() != ".gz":
-        yield path
-        return
-    with tempfile.TemporaryDirectory(prefix="topomatch-") as tmp:
-        plain = Path(tmp) / f"mesh{fmt}"
-        try:
-            with gzip.open(path, "rb") as src, open(plain, "wb") as dst:
-                shutil.copyfileobj(src, dst)
-        except (OSError, EOFError) as exc:
-            raise InputError(path, f"cannot decompress gzip file ({exc})") from None
-        yield plain
 
 
 @contextlib.contextmanager
@@ -118,6 +108,10 @@ def _read_open3d(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
     return V, F, "open3d"
 
 
+#: Formats whose files libigl may not read (binary variants): open3d is tried after libigl for these.
+OPEN3D_FALLBACK = (".ply", ".stl")
+
+
 def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
     """Read a triangle mesh file.
 
@@ -126,7 +120,7 @@ def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
     path : str or Path
         An OFF, OBJ, PLY or STL file, optionally gzipped (``.off.gz``).
     reader : {'auto', 'igl', 'open3d'}
-        'auto' tries libigl first and open3d second.
+        'auto' tries libigl first and, for PLY and STL only, open3d second.
 
     Returns
     -------
@@ -138,16 +132,25 @@ def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
     Raises
     ------
     InputError
-        Missing or unreadable file, unknown format, parse failure, no faces,
-        non-finite coordinates or face indices out of range.
+        Missing or unreadable file, unknown format, a structure that does not match its header
+        (truncated, under-counted, faces of fewer than 3 vertices), a file too large, parse
+        failure, no faces, non-finite coordinates or face indices out of range.
     """
+    mesh, used, _ = read_mesh_checked(path, reader=reader)
+    return mesh, used
+
+
+def read_mesh_checked(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str, FileFacts]:
+    """:func:`read_mesh`, with what the structure checks found (counts, polygons)."""
     path = check_readable_file(path)
     fmt = mesh_format(path)
-    readers = {"igl": [_read_igl], "open3d": [_read_open3d], "auto": [_read_igl, _read_open3d]}[reader]
+    readers = {"igl": [_read_igl], "open3d": [_read_open3d],
+               "auto": [_read_igl, _read_open3d] if fmt in OPEN3D_FALLBACK else [_read_igl]}[reader]
     problems = []
-    with _plain_file(path, fmt) as plain:
+    with plain_file(path, fmt) as plain:
         if plain.stat().st_size == 0:
             raise InputError(path, "file is empty")
+        facts = check_structure(plain, fmt, path)
         for read in readers:
             try:
                 V, F, used = read(plain)
@@ -159,7 +162,20 @@ def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
             problems.append(f"{read.__name__.removeprefix('_read_')} found {len(V)} vertices and {len(F)} faces")
         else:
             raise InputError(path, f"malformed {fmt[1:].upper()} file: " + "; ".join(problems))
-    return _checked_mesh(path, V, F, used), used
+    _check_counts(path, fmt, V, F, facts, used)
+    return _checked_mesh(path, V, F, used), used, facts
+
+
+def _check_counts(path: Path, fmt: str, V: np.ndarray, F: np.ndarray, facts: FileFacts, reader: str) -> None:
+    """The reader must have read what the header declares (no silently dropped vertices or faces)."""
+    if fmt == ".stl":
+        if facts.faces is not None and F.shape[0] != facts.faces:
+            raise InputError(path, f"{reader} read {F.shape[0]} of the {facts.faces} triangles the file holds")
+        return
+    if facts.vertices is not None and V.shape[0] != facts.vertices:
+        raise InputError(path, f"{reader} read {V.shape[0]} of the {facts.vertices} vertices the header declares")
+    if facts.faces is not None and F.shape[0] < facts.faces:
+        raise InputError(path, f"{reader} read {F.shape[0]} triangles from the {facts.faces} faces the file holds")
 
 
 def _checked_mesh(path: Path, V: np.ndarray, F: np.ndarray, reader: str) -> Mesh:
@@ -177,8 +193,8 @@ def _checked_mesh(path: Path, V: np.ndarray, F: np.ndarray, reader: str) -> Mesh
     return Mesh(V, F, name=name)
 
 
-@stage("load", params=LoadParams, version=1, consumes=("path",), produces=("mesh",))
+@stage("load", params=LoadParams, version=2, consumes=("path",), produces=("mesh",))
 def load(path: str, *, params: LoadParams) -> LoadResult:
-    """Read a mesh file (OFF, OBJ, PLY, STL, optionally gzipped)."""
-    mesh, used = read_mesh(path, reader=params.reader)
-    return LoadResult(mesh=mesh, path=str(path), reader=used)
+    """Read a mesh file (OFF, OBJ, PLY, STL, optionally gzipped), its structure checked first."""
+    mesh, used, facts = read_mesh_checked(path, reader=params.reader)
+    return LoadResult(mesh=mesh, path=str(path), reader=used, polygons=facts.polygons)

@@ -84,7 +84,7 @@ def test_load_stage_result(tmp_path, shapes):
     path = tmp_path / "octa.off"
     igl.write_triangle_mesh(str(path), ref.V, ref.F)
     result = load(str(path), params=LoadParams())
-    assert result.summary() == {"vertices": 6, "faces": 8, "reader": "igl"}
+    assert result.summary() == {"vertices": 6, "faces": 8, "reader": "igl", "polygons_triangulated": 0}
     np.testing.assert_array_equal(result.mesh.F, ref.F)
 
 
@@ -131,3 +131,61 @@ def test_unsupported_suffix(tmp_path):
     path = tmp_path / "mesh.xyz"
     path.write_text("0 0 0\n")
     _expect_input_error(path, "unsupported")
+
+
+# --------------------------------------------------------------------------- structure checks: nothing silently wrong
+
+
+def _write(tmp_path, name, text):
+    path = tmp_path / name
+    path.write_bytes(text.encode() if isinstance(text, str) else text)
+    return path
+
+
+QUAD = "OFF\n5 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n0 0 1\n4 0 1 2 3\n3 0 1 4\n"
+
+
+@pytest.mark.parametrize("name,text,message", [
+    ("truncated.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n", "truncated, the header declares 4 vertices and 2"),
+    ("undercounted.off", "OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n", "1 more lines follow"),
+    ("huge_header.off", "OFF\n50000000 1 0\n0 0 0\n", "declares 50000000 vertices"),
+    ("two.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n2 0 1\n3 0 1 2\n", "face 0 .* has 2 vertices"),
+    ("two.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\nf 1 2 3\nf 1 2\n", "face 2 .* has 2 vertices"),
+    ("nofaces.obj", "v 0 0 0\nv 1 0 0\nv 1 1 0\n", "no faces"),
+    ("negative.off", "OFF\n-3 1 0\n", "negative"),
+    ("short.stl", b"\0" * 80 + (1000).to_bytes(4, "little") + b"\0" * 60, "truncated binary STL"),
+    ("short.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+                  "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n",
+     "truncated, the header declares 4 element lines but only 2"),
+])
+def test_malformed_structure_is_an_error_not_a_partial_mesh(tmp_path, name, text, message):
+    with pytest.raises(InputError, match=f"{name}: .*{message}"):
+        read_mesh(_write(tmp_path, name, text))
+
+
+def test_truncated_file_is_not_rescued_by_open3d(tmp_path, bundled_mesh):
+    """libigl rejects a truncated OFF; open3d would read part of it: the load fails instead."""
+    import igl
+
+    torus = bundled_mesh("torus.off")
+    path = tmp_path / "torus.off"
+    igl.write_triangle_mesh(str(path), torus.V, torus.F)
+    lines = path.read_text().splitlines()
+    path.write_text("\n".join(lines[: 2 + torus.n_vertices + 300]) + "\n")
+    with pytest.raises(InputError, match="truncated"):
+        read_mesh(path)
+
+
+def test_polygons_are_triangulated_and_counted(tmp_path):
+    result = load(str(_write(tmp_path, "quad.off", QUAD)), params=LoadParams())
+    assert result.mesh.n_faces == 3 and result.polygons == 1
+    assert result.summary()["polygons_triangulated"] == 1
+
+
+def test_decompressed_size_is_capped(tmp_path, monkeypatch):
+    path = tmp_path / "bomb.off.gz"
+    with gzip.open(path, "wb") as fh:
+        fh.write(b"OFF\n" + b" " * 3_000_000)
+    monkeypatch.setenv("TOPOMATCH_MAX_MESH_BYTES", "1000000")
+    with pytest.raises(InputError, match="bomb.off.gz: decompresses to more than 1 MiB"):
+        read_mesh(path)
