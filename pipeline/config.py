@@ -30,7 +30,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import yaml
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from topomatch.pipeline.errors import ConfigError, InputError
@@ -38,6 +37,7 @@ from topomatch.pipeline.params import Params, validate_json_strict
 from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.paths import display_path, resolve_input
 from topomatch.pipeline.registry import get_report, get_stage
+from topomatch.pipeline.yaml_loading import load_yaml
 
 #: State entries that each kind of input provides before the first stage.
 INPUT_STATE = {
@@ -229,13 +229,15 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
     if not path.exists():
         raise InputError(path, "config file not found")
     try:
+        if path.stat().st_size > 4 * 2**20:
+            raise InputError(path, "config file larger than 4 MiB: refused")
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise InputError(path, f"cannot read config ({exc})") from None
     try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"{path}: not valid YAML: {exc}") from None
+        data = load_yaml(text)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
     if not isinstance(data, dict):
         raise ConfigError(f"{path}: a config must be a YAML mapping, got {type(data).__name__}")
     return data
@@ -256,9 +258,9 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
             raise ConfigError(f"--set {item!r}: expected key=value")
         key, text = item.split("=", 1)
         try:
-            value = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"--set {item!r}: value is not valid YAML ({exc})") from None
+            value = load_yaml(text)
+        except ConfigError as exc:
+            raise ConfigError(f"--set {item!r}: the value is {exc}") from None
         parts = key.strip().split(".")
         if parts[0] == "sweep" and len(parts) >= 3:  # sweep keys contain a dot: sweep.<stage>.<param>
             data.setdefault("sweep", {})[".".join(parts[1:])] = value
