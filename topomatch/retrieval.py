@@ -173,6 +173,7 @@ class PartReport:
     todo: int
     done: int = 0
     failed: int = 0
+    failed_before: int = 0  # meshes recorded as failed by an earlier run, skipped (retry_failed retries them)
     seconds: float = 0.0
     failures: list[str] = field(default_factory=list)
 
@@ -186,6 +187,11 @@ class IndexReport:
     n_files: int
     parts: list[PartReport]
     seconds: float
+
+    @property
+    def failed(self) -> int:
+        """Meshes (per part) without a descriptor: failed now or in an earlier run."""
+        return sum(p.failed + p.failed_before for p in self.parts)
 
 
 def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METHOD, labels: str | Path | None = None,
@@ -225,7 +231,8 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
             known = store.known(part, phash, include_failed=not retry_failed)
             mine = [dataclasses.replace(item, item_id=f"{part}/{item.item_id}") for item in experiment.items()
                     if hashes[item.input_path] not in known]
-            plans[part] = (PartReport(part, phash, len(mine)), params)
+            before = 0 if retry_failed else len(store.failed(part, phash) & set(hashes.values()))
+            plans[part] = (PartReport(part, phash, len(mine), failed_before=before), params)
             for item in mine:
                 todo.setdefault(item.input_path, []).append(item)
         n_items = sum(map(len, todo.values()))
@@ -304,17 +311,21 @@ class Collection:
 
     def methods(self) -> list[tuple[str, str, int]]:
         """(method, params hash, shapes indexed ok) present in the index."""
-        with ShapeIndex(self.db) as store:
+        with ShapeIndex(self.db, readonly=True) as store:
             return store.methods()
 
     def _rows(self, method: str) -> list[Row]:
         phash = params_of(method_experiment(method, []))[1]
-        with ShapeIndex(self.db) as store:
+        with ShapeIndex(self.db, readonly=True) as store:
             rows = store.rows(method, phash)
             if not rows:
-                present = ", ".join(f"{m} ({n} ok)" for m, _, n in store.methods()) or "nothing"
+                present = store.methods()
+                listing = ", ".join(f"{m} ({n} ok)" for m, _, n in present) or "nothing"
+                stale = any(m == method for m, _, _ in present)
+                hint = (f"; its {method} rows were made with other parameters or stage versions: run topomatch index "
+                        f"again to update them") if stale else f"; index it with --method {method}"
                 raise ConfigError(f"{self.db}: no shapes indexed with method {method!r} and the current parameters "
-                                  f"(the index has: {present})")
+                                  f"(the index has: {listing}){hint}")
         return rows
 
     def parts(self, method: str) -> tuple[list[Row], dict[str, list[Descriptor]]]:
@@ -349,6 +360,8 @@ class Collection:
         from topomatch.stages.retrieval.fusion import fused_query
         from topomatch.stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
 
+        if not (isinstance(k, int) and k >= 1):
+            raise ConfigError(f"k must be a whole number of at least 1, got {k!r}")
         m = get_method(method)
         rows, descriptors = self.parts(method)
         t = time.perf_counter()

@@ -19,6 +19,11 @@ Schema (table ``shapes``)::
 Re-indexing skips rows whose (content_hash, method, params_hash) exist, so
 unchanged meshes are not recomputed and an interrupted index resumes; each row
 is committed as soon as its mesh is done.
+
+Every SQLite error becomes an :class:`~topomatch.pipeline.errors.InputError` naming the file:
+a database another process holds is waited for (:data:`BUSY_SECONDS`) and then reported as
+locked, not as foreign; a damaged file or page, a foreign database and a descriptor that is not
+a plain numeric array (e.g. a pickle) are reported as such.
 """
 
 from __future__ import annotations
@@ -77,21 +82,66 @@ def _to_blob(array: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def _from_blob(blob: bytes | None) -> np.ndarray | None:
-    return None if blob is None else np.load(io.BytesIO(blob), allow_pickle=False)
+def _from_blob(blob: bytes | None, where: Path, mesh: str) -> np.ndarray | None:
+    if blob is None:
+        return None
+    try:
+        array = np.load(io.BytesIO(blob), allow_pickle=False)
+    except Exception as exc:  # a pickle (refused), a truncated or foreign blob
+        raise InputError(where, f"the descriptor of {mesh} is damaged or not a plain array ({type(exc).__name__}: "
+                                f"{exc}); delete its rows or re-create the index") from None
+    if array.dtype.kind not in "biuf":
+        raise InputError(where, f"the descriptor of {mesh} has dtype {array.dtype}, not numbers")
+    return array
+
+
+#: How long a database locked by another process is waited for (seconds).
+BUSY_SECONDS = 60.0
+
+
+def _problem(exc: sqlite3.Error) -> str:
+    """What an SQLite error means for a user."""
+    text = str(exc)
+    if "locked" in text or "busy" in text:
+        return (f"the index is locked by another process ({text}, after {BUSY_SECONDS:.0f} s); try again when "
+                "it has finished")
+    if isinstance(exc, sqlite3.DatabaseError) and ("not a database" in text or "malformed" in text):
+        return f"the file is damaged or not a topomatch index ({text})"
+    if "no such table" in text or "no such column" in text:
+        return f"not a topomatch index ({text})"
+    return f"database error ({type(exc).__name__}: {text})"
 
 
 class ShapeIndex:
-    """Open (or create) the index at ``path``."""
+    """Open (or create) the index at ``path``; ``readonly`` opens an existing index without writing to it."""
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, *, readonly: bool = False):
         self.path = Path(path)
+        if readonly and not self.path.is_file():
+            raise InputError(self.path, "index not found (create it with topomatch index)")
+        if self.path.exists() and not self.path.is_file():
+            raise InputError(self.path, "not a file")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.db = sqlite3.connect(self.path)
-            self.db.executescript(SCHEMA)
-        except sqlite3.DatabaseError as exc:
-            raise InputError(self.path, f"not a topomatch index ({exc})") from None
+        except OSError as exc:
+            raise InputError(self.path, f"cannot create the index's folder ({exc.strerror or exc})") from None
+        try:
+            if readonly:
+                self.db = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True, timeout=BUSY_SECONDS)
+                self.db.execute("SELECT content_hash, path, label, method, params_hash, status, descriptor "
+                                "FROM shapes LIMIT 1").fetchall()
+            else:
+                self.db = sqlite3.connect(self.path, timeout=BUSY_SECONDS)
+                self.db.executescript(SCHEMA)
+        except sqlite3.Error as exc:
+            raise InputError(self.path, _problem(exc)) from None
+
+    def _sql(self, sql: str, args=()) -> list:
+        """Run one statement; SQLite errors become InputErrors naming the index."""
+        try:
+            return list(self.db.execute(sql, args))
+        except sqlite3.Error as exc:
+            raise InputError(self.path, _problem(exc)) from None
 
     def close(self) -> None:
         self.db.close()
@@ -107,29 +157,40 @@ class ShapeIndex:
         sql = "SELECT content_hash FROM shapes WHERE method = ? AND params_hash = ?"
         if not include_failed:
             sql += " AND status = 'ok'"
-        return {r[0] for r in self.db.execute(sql, (method, params_hash))}
+        return {r[0] for r in self._sql(sql, (method, params_hash))}
+
+    def failed(self, method: str, params_hash: str) -> set[str]:
+        """Content hashes recorded as failed for this method and params."""
+        return {r[0] for r in self._sql("SELECT content_hash FROM shapes WHERE method = ? AND params_hash = ? AND "
+                                        "status = 'failed'", (method, params_hash))}
 
     def put(self, *, content_hash: str, path: str, label: str | None, method: str, params_hash: str, params: dict,
             status: str, reason: str | None = None, n_endpoints: int | None = None, kind: str | None = None,
             descriptor: np.ndarray | None = None, seconds: float | None = None) -> None:
-        """Insert or replace one row and commit."""
-        self.db.execute(
+        """Insert or replace one row and commit (a lock held by another process is waited for)."""
+        self._sql(
             "INSERT OR REPLACE INTO shapes (content_hash, path, label, method, params_hash, params, status, reason,"
             " n_endpoints, kind, descriptor, seconds, created) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (content_hash, path, label, method, params_hash, json.dumps(params), status, reason, n_endpoints, kind,
              None if descriptor is None else _to_blob(descriptor), seconds,
              datetime.now(timezone.utc).isoformat(timespec="seconds")))
-        self.db.commit()
+        self._commit()
+
+    def _commit(self) -> None:
+        try:
+            self.db.commit()
+        except sqlite3.Error as exc:
+            raise InputError(self.path, _problem(exc)) from None
 
     def set_labels(self, labels: dict[str, str]) -> int:
         """Set the label of every row whose resolved path is a key of ``labels``; returns the count."""
         changed = 0
-        for (row_id, path) in list(self.db.execute("SELECT id, path FROM shapes")):
+        for (row_id, path) in self._sql("SELECT id, path FROM shapes"):
             label = labels.get(str(Path(path).resolve()))
             if label is not None:
-                self.db.execute("UPDATE shapes SET label = ? WHERE id = ?", (label, row_id))
+                self._sql("UPDATE shapes SET label = ? WHERE id = ?", (label, row_id))
                 changed += 1
-        self.db.commit()
+        self._commit()
         return changed
 
     def rows(self, method: str, params_hash: str | None = None, *, status: str | None = "ok") -> list[Row]:
@@ -144,10 +205,9 @@ class ShapeIndex:
             sql += " AND status = ?"
             args.append(status)
         sql += " ORDER BY path, id"
-        return [Row(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], _from_blob(r[8]))
-                for r in self.db.execute(sql, args)]
+        return [Row(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], _from_blob(r[8], self.path, r[1]))
+                for r in self._sql(sql, args)]
 
     def methods(self) -> list[tuple[str, str, int]]:
         """(method, params_hash, ok rows) present in the index."""
-        return list(self.db.execute(
-            "SELECT method, params_hash, SUM(status = 'ok') FROM shapes GROUP BY method, params_hash"))
+        return self._sql("SELECT method, params_hash, SUM(status = 'ok') FROM shapes GROUP BY method, params_hash")

@@ -193,7 +193,7 @@ def _checked_mesh(path: Path, V: np.ndarray, F: np.ndarray, reader: str) -> Mesh
     return Mesh(V, F, name=name)
 
 
-@stage("load", params=LoadParams, version=2, consumes=("path",), produces=("mesh",))
+@stage("load", params=LoadParams, version=1, consumes=("path",), produces=("mesh",))
 def load(path: str, *, params: LoadParams) -> LoadResult:
     """Read a mesh file (OFF, OBJ, PLY, STL, optionally gzipped), its structure checked first."""
     mesh, used, facts = read_mesh_checked(path, reader=params.reader)

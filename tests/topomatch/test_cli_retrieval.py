@@ -64,9 +64,13 @@ def test_bad_mesh_is_recorded_and_the_others_indexed(collection, tmp_path, capsy
     (collection / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n")
     db = tmp_path / "index.db"
     code, out, err = run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
-    assert code == 0 and "6 indexed, 1 failed" in out and "broken.off" in err and "malformed OFF" in err
+    assert code == 1 and "6 indexed, 1 failed" in out and "broken.off" in err and "malformed OFF" in err
+    assert "1 descriptors are missing" in err
     status = dict(sqlite3.connect(db).execute("SELECT path, status FROM shapes").fetchall())
     assert sum(s == "failed" for s in status.values()) == 1
+    # a re-run skips the failed mesh, says so, and still exits 1
+    code, out, _ = run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
+    assert code == 1 and "0 indexed, 0 failed, 7 unchanged (skipped), 1 failed before" in out
 
 
 def test_interrupted_index_resumes(collection, tmp_path, capsys, monkeypatch):

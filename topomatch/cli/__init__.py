@@ -4,8 +4,9 @@
 ``match``, ``index``, ``query``, ``evaluate`` (:mod:`.retrieval`); ``register`` (:mod:`.registration`).
 Each command is a thin layer over the Python API (:mod:`topomatch`), with its options generated
 from the params models (:mod:`topomatch.pipeline.cli_options`). Errors print one short message
-naming the file and the problem and exit non-zero (2 for a bad config or usage, 1 for bad input
-data or failed items); ``--debug`` shows the traceback instead.
+naming the file and the problem and exit non-zero: 2 for a bad config or usage, 1 for bad input
+data, a file that cannot be written, failed items or a flagged registration, 130 when interrupted;
+``--debug`` shows the traceback instead.
 """
 
 from __future__ import annotations
@@ -38,6 +39,18 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
+def describe_os_error(exc: OSError) -> str:
+    """``path: problem`` for a file-system error, in a user's words."""
+    where = exc.filename or ""
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        problem = f"a file is in the way of a folder to write into ({exc.strerror}); choose another path"
+    elif isinstance(exc, PermissionError):
+        problem = "permission denied"
+    else:
+        problem = exc.strerror or str(exc)
+    return f"{where}: {problem}" if where else problem
+
+
 def _command_name(argv: list[str]) -> str:
     """The command named on the command line ("" when none is: the top-level help or usage)."""
     for arg in argv:
@@ -56,6 +69,11 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"topomatch: error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:  # a file that cannot be written or read where the command put it (--out, --db, ...)
+        if args.debug:
+            raise
+        print(f"topomatch: error: {describe_os_error(exc)}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print("topomatch: interrupted; finished stages are cached, run again to resume", file=sys.stderr)
         return 130

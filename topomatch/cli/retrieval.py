@@ -13,6 +13,7 @@ import json
 import sys
 
 from topomatch.cli.common import command
+from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 
 
@@ -66,6 +67,17 @@ def add_parsers(sub) -> None:
             build=_evaluate_arguments)
 
 
+def positive_int(text: str) -> int:
+    """An argparse type: a whole number of at least 1."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
 def _match_arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_PAIR_METHOD
 
@@ -94,7 +106,7 @@ def _query_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("mesh", help="query mesh")
     p.add_argument("--db", required=True, help="index file")
-    p.add_argument("-k", type=int, default=10, help="results to show (default 10)")
+    p.add_argument("-k", type=positive_int, default=10, help="results to show (default 10)")
     _method_arg(p, DEFAULT_METHOD)
     _with_match_options(p)
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -134,12 +146,17 @@ def cmd_index(args: argparse.Namespace) -> int:
                    executor=settings.get("kind"), retry_failed=args.retry_failed,
                    progress=not args.no_progress)
     for part in report.parts:
+        before = f", {part.failed_before} failed before (skipped; --retry-failed retries them)" \
+            if part.failed_before else ""
         print(f"{report.db}: {part.done} indexed, {part.failed} failed, {report.n_files - part.todo} unchanged "
-              f"(skipped) [{part.method}, {part.seconds:.1f} s of worker time]")
+              f"(skipped){before} [{part.method}, {part.seconds:.1f} s of worker time]")
     print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
     for part in report.parts:
         for reason in part.failures:
             print(f"  failed ({part.method}): {reason}", file=sys.stderr)
+    if report.failed:
+        raise RunError(f"{report.failed} descriptors are missing from {report.db} (failed meshes, listed above); "
+                       "the others were indexed")
     return 0
 
 
