@@ -46,8 +46,37 @@ def execute_groups(groups: Sequence[Sequence[Item]], cache_root: str | None,
         yield from _local(groups, cache_root, config.workers or default_workers())
 
 
+def _worker_init(parent: int) -> None:
+    """Pool-worker initializer: leave when the parent dies, and use one BLAS thread."""
+    _exit_with_parent(parent)
+    _single_threaded()
+
+
+def _exit_with_parent(parent: int, interval: float = 0.5) -> None:
+    """Watch the process that started the pool and end this worker when it is gone.
+
+    A worker started by ``forkserver`` is a child of the fork server, not of the command, so when
+    the command is killed (SIGKILL, an OOM kill) nothing tells its workers, and they would stay
+    alive with their memory (~100 MB each): a daemon thread polls the command's pid instead.
+    """
+    import threading
+    import time
+
+    def watch() -> None:
+        while True:
+            time.sleep(interval)
+            try:
+                os.kill(parent, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:  # the pid was reused by another user's process: ours is gone
+                os._exit(1)
+
+    threading.Thread(target=watch, name="topomatch-parent-watch", daemon=True).start()
+
+
 def _single_threaded() -> None:
-    """Pool-worker initializer: one BLAS / OpenMP thread per worker process.
+    """One BLAS / OpenMP thread per worker process.
 
     threadpoolctl only limits the libraries already loaded, and scipy ships its own OpenBLAS
     (besides numpy's), loaded with ``scipy.linalg``: import it first.
@@ -69,7 +98,8 @@ def _local(groups: Sequence[Sequence[Item]], cache_root: str | None, workers: in
         return
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["topomatch.pipeline.item"])
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_single_threaded) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init,
+                             initargs=(os.getpid(),)) as pool:
         with _main_script_hidden([item for group in groups for item in group]):
             futures = [pool.submit(run_items, group, cache_root) for group in groups]  # starts the workers
         try:

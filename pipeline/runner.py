@@ -7,6 +7,7 @@ A run writes ``<out>/<config name>-<content hash>/``::
     tables/          results.csv/.json (one row per item) and report tables
     figures/         PNG figures of the reports
     index.html       a page that shows all of it
+    INCOMPLETE       only while the run has not finished (or when it was killed): resume by running again
 
 Stage results are cached by content hash (see :mod:`topomatch.pipeline.cache`), so an
 interrupted run resumes where it stopped and a changed parameter recomputes
@@ -16,6 +17,7 @@ only the stages downstream of it.
 from __future__ import annotations
 
 import json
+import os
 import time
 from dataclasses import dataclass
 from datetime import datetime, timezone
@@ -34,6 +36,8 @@ from topomatch.pipeline.reports import write_report_outputs, write_index_html, w
 
 DEFAULT_OUT = Path("runs")
 CACHE_DIRNAME = ".cache"
+#: A run folder holding this file is incomplete (running, killed or interrupted).
+INCOMPLETE = "INCOMPLETE"
 
 
 @dataclass
@@ -73,6 +77,11 @@ def run_experiment(
     out_root = Path(out_root)
     run_dir = out_root / f"{experiment.name}-{experiment.content_hash()}"
     run_dir.mkdir(parents=True, exist_ok=True)
+    marker = run_dir / INCOMPLETE
+    atomic_write_text(marker, f"This run started at {datetime.now(timezone.utc).isoformat(timespec='seconds')} "
+                              f"(process {os.getpid()}) and has not finished: it is running, or it was killed or "
+                              "interrupted. Its finished stages are cached: run the same command again to resume; "
+                              "this file is removed when the run completes.\n")
     cache_root = None
     if use_cache:
         cache_root = str(Path(cache_dir) if cache_dir is not None else out_root / CACHE_DIRNAME)
@@ -99,4 +108,5 @@ def run_experiment(
     )
     atomic_write_text(run_dir / "manifest.json", json.dumps(manifest, indent=2, default=str))
     write_index_html(run_dir, experiment, results, manifest, written)
+    marker.unlink(missing_ok=True)
     return RunOutcome(run_dir, results, manifest)

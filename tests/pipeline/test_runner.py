@@ -192,3 +192,17 @@ def test_items_run_together_compute_their_shared_stages_once(small_config):
     assert CALLS == ["torus"]  # the shared stage ran once
     assert second.cache_hits["load"] and second.cache_hits["test_interrupt"] and not second.cache_hits["noise"]
     assert second.results["clean"] is first.results["clean"]
+
+
+def test_an_interrupted_run_folder_is_marked_incomplete(small_config, tmp_path):
+    from topomatch.pipeline.runner import INCOMPLETE
+
+    small_config["sweep"] = {}
+    small_config["stages"] = ["load", {"clean": {}}, {"test_interrupt": {"fail_on": "eight_genus2"}}]
+    with pytest.raises(KeyboardInterrupt):
+        _run(small_config, tmp_path)
+    (folder,) = (tmp_path / "runs").glob("small-*")
+    assert "has not finished" in (folder / INCOMPLETE).read_text()
+    small_config["stages"][2] = {"test_interrupt": {"fail_on": "nothing"}}
+    outcome = _run(small_config, tmp_path)
+    assert not (outcome.run_dir / INCOMPLETE).exists()
