@@ -185,5 +185,6 @@ def _unusable(spec: StageSpec, value: Any) -> str | None:
 
 
 def _name_input(message: str, input_path: str) -> str:
-    """Make sure an error message names the input file."""
-    return message if not input_path or input_path in message else f"{input_path}: {message}"
+    """Make sure an error message names the input file (a pair labelled ``a|b`` is named by either)."""
+    named = not input_path or any(part and part in message for part in input_path.split("|"))
+    return message if named else f"{input_path}: {message}"

@@ -32,7 +32,7 @@ if not (Path(__file__).resolve().parent / "pipeline").is_dir():
 
 #: Public name -> the module that defines it.
 _API = {
-    "read_mesh": "topomatch.meshes",
+    "read_mesh": "topomatch.meshes", "Mesh": "topomatch.meshes",
     "skeleton": "topomatch.skeletons", "Skeleton": "topomatch.skeletons",
     "write_skeleton_files": "topomatch.skeletons",
     "match": "topomatch.retrieval", "MatchResult": "topomatch.retrieval",

@@ -31,7 +31,8 @@ class Skeleton:
     The JSON fields (:meth:`to_dict`) are ``mesh`` (the input's name), ``function``, ``levels``,
     ``n_vertices``, ``n_faces`` (of the cleaned mesh), ``genus``, ``n_nodes``, ``n_edges``,
     ``n_endpoints``, ``cycle_rank``, ``reeb_nodes``, ``removed_branches`` (pruning), ``lambda2``
-    (Fiedler function only, else None) and ``seconds`` (per stage). Besides them: ``graph`` (the
+    (Fiedler function only, else None), ``seconds`` (per stage) and ``warnings`` (what makes the
+    result doubtful, e.g. a non-manifold mesh; empty when nothing does). Besides them: ``graph`` (the
     pruned skeleton, a networkx MultiGraph with node attributes ``pos``, ``band``, ``value``,
     ``area``, ``members``), ``endpoints`` (its degree-1 nodes), ``reeb`` (the unpruned Reeb graph),
     ``mesh_used`` (the cleaned mesh the function lives on), ``values`` (the Morse function on its
@@ -52,6 +53,7 @@ class Skeleton:
     removed_branches: int
     lambda2: float | None
     seconds: dict[str, float]
+    warnings: list[str]
     graph: Any = field(repr=False)
     endpoints: list = field(repr=False)
     reeb: Any = field(repr=False)
@@ -61,7 +63,8 @@ class Skeleton:
 
     #: The fields printed by ``--json``, in order.
     JSON_FIELDS = ("mesh", "function", "levels", "n_vertices", "n_faces", "genus", "n_nodes", "n_edges",
-                   "n_endpoints", "cycle_rank", "reeb_nodes", "removed_branches", "lambda2", "seconds")
+                   "n_endpoints", "cycle_rank", "reeb_nodes", "removed_branches", "lambda2", "seconds",
+                   "warnings")
 
     def to_dict(self) -> dict[str, Any]:
         """The JSON fields as a plain dict."""
@@ -123,13 +126,20 @@ def skeleton_with(mesh: Mesh | str | Path, overrides: dict[str, dict[str, Any]])
     morse, level_sets = r["morse"], r["level_sets"]
     reeb, pruned = r["reeb_graph"].reeb, r["prune"].skeleton
     used = result.final("mesh")
+    after = r["clean"].after
+    warnings = []
+    if not after.is_manifold:
+        warnings.append(f"the cleaned mesh has {after.n_nonmanifold_edges} non-manifold edges and "
+                        f"{after.n_nonmanifold_vertices} non-manifold vertices: its genus is undefined and the "
+                        f"Reeb graph's loops need not match a surface (a config with "
+                        f"clean: {{fail_on_nonmanifold: true}} refuses such meshes)")
     return Skeleton(
         mesh=name, function=morse.function.kind, levels=level_sets.level_sets.n_levels,
         n_vertices=used.n_vertices, n_faces=used.n_faces, genus=r["clean"].after.genus,
         n_nodes=pruned.graph.number_of_nodes(), n_edges=pruned.graph.number_of_edges(),
         n_endpoints=len(pruned.endpoints), cycle_rank=reeb.cycle_rank, reeb_nodes=reeb.n_nodes,
         removed_branches=pruned.removed_branches, lambda2=morse.function.info.get("lambda2"),
-        seconds={label: round(s, 6) for label, s in result.seconds.items()},
+        seconds={label: round(s, 6) for label, s in result.seconds.items()}, warnings=warnings,
         graph=pruned.graph, endpoints=list(pruned.endpoints), reeb=reeb, mesh_used=used,
         values=morse.function.values, item=result)
 

@@ -203,6 +203,23 @@ def _face_components(F: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
     return int(count), np.asarray(labels, dtype=np.int64)[F[:, 0]]
 
 
+EXTENT_RANGE = (1e-50, 1e50)
+"""Supported extents: squared areas (Heron's formula, ~ extent^4) stay normal double-precision numbers."""
+
+
+def _check_extent(name: str, V: np.ndarray) -> None:
+    """Refuse a mesh whose size makes squared lengths overflow or underflow (areas, cotangents)."""
+    lo, hi = EXTENT_RANGE
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float(np.max(np.abs(V.max(axis=0) - V.min(axis=0)))) if len(V) else 0.0
+    if extent == 0.0:
+        raise InputError(name, "all vertices are at one point")
+    if not lo <= extent <= hi:
+        what = "overflow" if not extent < hi else "underflow"
+        raise InputError(name, f"the mesh is {extent:.3g} units across: squared lengths and areas {what} double "
+                               f"precision (supported: {lo:g} to {hi:g}); rescale it, e.g. to unit size")
+
+
 def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     """Repair and validate ``mesh`` (see the module docstring for the steps).
 
@@ -233,6 +250,7 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     if before.n_unreferenced_vertices:
         V, F = _remove_unreferenced(V, F)
     unreferenced = mesh.n_vertices - V.shape[0]
+    _check_extent(mesh.name, V)
 
     n_before = V.shape[0]
     V, F = merge_duplicate_vertices(V, F, params.merge_tolerance * bbox_diagonal(V))

@@ -21,11 +21,14 @@ from typing import Literal
 
 import numpy as np
 from pydantic import Field
-
-from topomatch.pipeline.contract import Params, StageResult, stage
+from topomatch.pipeline.contract import InputError, Params, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.morse.function import MorseFunction
-from topomatch.stages.spectral.eigen import Eigenpairs, relative_gap, smallest_eigenpairs
+from topomatch.stages.spectral.eigen import (
+    Eigenpairs,
+    relative_gap,
+    smallest_eigenpairs,
+)
 from topomatch.stages.spectral.laplacian import MassType, laplacian
 
 
@@ -94,6 +97,10 @@ def fiedler_result(mesh: Mesh, *, mass: MassType = "full", method: str = "auto",
         No eigensolver converged.
     """
     start = time.perf_counter()
+    if mesh.n_vertices <= n_eigenpairs:
+        raise InputError(mesh.name, f"the mesh has {mesh.n_vertices} vertices and {mesh.n_faces} faces: too few for "
+                                    f"{n_eigenpairs} Laplace-Beltrami eigenpairs (a closed surface has at least 4 "
+                                    f"vertices)")
     lap = laplacian(mesh, mass)
     pairs = smallest_eigenpairs(lap.Q, lap.K, n_eigenpairs, method=method, tol=tol, V=mesh.V, F=mesh.F,
                                 sign_rule=sign_rule)

@@ -2,8 +2,7 @@
 
 The known transform (``truth``: a mapping with ``tx``, ``ty``, ``angle``; missing keys are 0) is
 read in the same ITK convention as the estimate, about the fixed image's centre
-``((W - 1) / 2, (H - 1) / 2)`` (``truth_center: itk`` reads it about ``(W / 2, H / 2)`` instead,
-the centre ITK's examples compute as ``origin + spacing * size / 2``; see docs/registration.md).
+``((W - 1) / 2, (H - 1) / 2)``.
 
 The **target registration error** of a pixel x of the fixed grid is ``|T_est(x) - T_true(x)|``
 in pixels; ``tre_mean`` is its mean over every pixel of the fixed image and ``tre_max`` its
@@ -15,7 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
 from pydantic import Field
 
@@ -31,11 +30,9 @@ class EvaluateParams(Params):
     """Parameters of :func:`evaluate`."""
 
     threshold: float = Field(1.0, gt=0, allow_inf_nan=False, description="success: mean TRE at most this (pixels)")
-    truth_center: Literal["pixel", "itk"] = Field("pixel", description="rotation centre of the truth: ((W-1)/2, (H-1)/2) "
-                                                                       "or ITK's (W/2, H/2)")
 
 
-def truth_transform(truth: dict[str, Any] | None, fixed: Image, center: str = "pixel") -> RigidTransform:
+def truth_transform(truth: dict[str, Any] | None, fixed: Image) -> RigidTransform:
     """The known transform as a :class:`RigidTransform` about the fixed image's centre.
 
     Raises
@@ -54,8 +51,7 @@ def truth_transform(truth: dict[str, Any] | None, fixed: Image, center: str = "p
     except (TypeError, ValueError) as exc:
         raise StageError(f"truth values must be numbers, got {truth} ({exc})") from None
     H, W = fixed.shape
-    t = RigidTransform(tx, ty, angle, ((W - 1) / 2.0, (H - 1) / 2.0) if center == "pixel" else (W / 2.0, H / 2.0))
-    return t.with_center(fixed.center)
+    return RigidTransform(tx, ty, angle, ((W - 1) / 2.0, (H - 1) / 2.0)).with_center(fixed.center)
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +94,7 @@ class EvaluateResult(StageResult):
 def evaluate_registration(fixed: Image, registration: Registration, truth: dict[str, Any] | None,
                           params: EvaluateParams = EvaluateParams()) -> EvaluateResult:
     """Compare ``registration`` with ``truth`` on the fixed image's grid."""
-    true_t = truth_transform(truth, fixed, params.truth_center)
+    true_t = truth_transform(truth, fixed)
     est = registration.transform.with_center(fixed.center)
     tre = target_registration_error(est, true_t, fixed.shape)
     d_angle = (est.angle - true_t.angle + 180.0) % 360.0 - 180.0

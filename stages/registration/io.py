@@ -175,7 +175,8 @@ def _image_from_array(path: Path, arr: np.ndarray, spacing: tuple[float, ...], s
                                    f"choose a slice (load_image.slice, load_pair.fixed_slice / moving_slice)")
         n = arr.shape[axis]
         if not -n <= slice_index < n:
-            raise InputError(path, f"slice {slice_index} is out of range: the volume has {n} slices along axis {axis}")
+            raise InputError(path, f"slice {slice_index} is out of range: the volume has {n} slices along axis "
+                                   f"{axis} (0 to {n - 1})")
         arr = np.take(arr, slice_index, axis=axis)
         spacing = tuple(s for a, s in enumerate(spacing) if a != axis)
         source = f"slice {slice_index % n} (axis {axis}) of {path}"

@@ -50,6 +50,11 @@ class Objective:
         self.min_overlap = float(min_overlap)
         self.n_evals = 0
 
+    def with_min_overlap(self, min_overlap: float) -> "Objective":
+        """The same measure on the same histogram with another overlap bound."""
+        return Objective(self.histogram, self.metric, alpha=self.alpha, weights=self.weights, tmi_form=self.tmi_form,
+                         min_overlap=min_overlap)
+
     @property
     def factor(self) -> int:
         return self.histogram.factor

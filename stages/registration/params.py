@@ -121,9 +121,16 @@ class CheckSpec(Params):
     """The self-check: flag a result on a search bound, or one that a probe rotation beats."""
 
     capture: bool = Field(True, description="flag results that a probe rotation beats (outside the capture range)")
-    probes: int = Field(24, ge=4, description="probe rotations over the full circle for the capture check")
+    probes: int = Field(24, ge=4, description="angles over the full circle of the coarse search")
+    grid: int = Field(13, ge=1, description="translations per axis of the coarse search (over the search box)")
+    min_content: float = Field(0.2, ge=0, le=1, allow_inf_nan=False,
+                               description="flag a result that maps less than this fraction of the fixed image's "
+                                           "content (Otsu foreground) onto the moving image's content (0: off)")
+    min_prominence: float = Field(6.0, ge=0, allow_inf_nan=False,
+                                  description="flag a result less than this many median absolute deviations "
+                                              "above the coarse search's median (0: off)")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
-    candidates: int = Field(2, ge=1, description="best probes refined and compared with the result")
+    candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
     refine: int = Field(20, ge=0, description="first-level iterations from the best probe before it is compared "
                                               "with the result")
     retry: bool = Field(True, description="when a probe wins, run the schedule once more from it (within the bounds)")

@@ -46,8 +46,9 @@ import numpy as np
 
 from topomatch.pipeline.contract import StageError, StageResult, stage
 from topomatch.stages.registration.image import Image
-from topomatch.stages.registration.objective import Level, build_pyramid, intensity_centroid, rms_radius
+from topomatch.stages.registration.objective import Level, Objective, build_pyramid, intensity_centroid, rms_radius
 from topomatch.stages.registration.params import LevelSpec, RegisterParams  # noqa: F401 (LevelSpec: the API)
+from topomatch.stages.registration.search import GridSearch, SearchImages, grid_search
 from topomatch.stages.registration.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.spsa import OptimizeResult, SPSASettings, spsa_maximize
 from topomatch.stages.registration.transform import RigidTransform, rotation_matrix
@@ -150,18 +151,17 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     """
     t0 = time.perf_counter()
     run = _Run(fixed, moving, params, callback)
-    theta, total_iter, stop = run.schedule_from(run.start)
+    theta, _, stop = run.schedule_from(run.start)
     value = run.levels[-1].objective(theta)
-    problems, probe = run.self_check(theta, value, stop)
+    problems, better = run.self_check(theta, value, stop)
     restarts = 0
-    if probe is not None and params.check.retry and np.all(probe >= run.lower) and np.all(probe <= run.upper):
-        # the capture check found a better basin (the probe was already refined on the first level):
-        # continue the first level from it, then run the other levels again
+    if better is not None and params.check.retry:
+        # the capture check found a better basin and ran the schedule from it: adopt that result
         restarts = 1
-        theta, more_iter, stop = run.schedule_from(probe, done=params.check.refine)
-        total_iter += more_iter
+        theta, stop = better
         value = run.levels[-1].objective(theta)
         problems, _ = run.self_check(theta, value, stop)
+    total_iter = sum(len(h["level"]) for h in run.history)
     transform = RigidTransform.from_params(theta, fixed.center)
     ok, reason = not problems, "; ".join(problems)
     history = {key: np.concatenate([h[key] for h in run.history]) for key in ("level", "theta", "value", "step",
@@ -175,6 +175,10 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     return reg
 
 
+MIN_LEVEL_SIDE = 16
+"""Smallest side (pixels) of a pyramid level; coarser levels of the schedule are skipped."""
+
+
 class _Run:
     """One registration in progress: the pyramid, the parameter scaling, the bounds, the random
     stream and the history, shared by the schedule, the capture-check refinements and the self-check."""
@@ -183,8 +187,9 @@ class _Run:
                  callback: Callable[[int, int, np.ndarray, float], bool | None] | None):
         self.fixed, self.moving, self.params, self.callback = fixed, moving, params, callback
         smallest = min(min(fixed.shape), min(moving.shape))
-        # levels too coarse for a small image are skipped
-        self.schedule = ([lv for lv in params.schedule if smallest // lv.factor >= 8]
+        # levels too coarse for a small image are skipped: below MIN_LEVEL_SIDE pixels a side the
+        # histogram holds too few samples for a gradient estimate and SPSA random-walks
+        self.schedule = ([lv for lv in params.schedule if smallest // lv.factor >= MIN_LEVEL_SIDE]
                          or [params.schedule[-1].model_copy(update={"factor": 1})])
         m = params.metric
         self.levels: list[Level] = build_pyramid(
@@ -196,16 +201,21 @@ class _Run:
         t_init = initial_translation(fixed, moving, params.transform.init)
         self.start = np.array([t_init[0], t_init[1], 0.0])
         b = params.bounds
-        max_t = b.max_translation if b.max_translation is not None else 0.5 * min(fixed.shape)
+        max_t = self.max_translation = (b.max_translation if b.max_translation is not None
+                                         else 0.5 * min(fixed.shape))
         self.lower = np.array([t_init[0] - max_t, t_init[1] - max_t, -b.max_angle])
         self.upper = np.array([t_init[0] + max_t, t_init[1] + max_t, b.max_angle])
         self.rng = np.random.default_rng(params.seed)
+        self.radius = rms_radius(fixed.shape)
+        self._grid: GridSearch | None = None
         self.history: list[dict[str, np.ndarray]] = []
 
     def optimize(self, li: int, spec: LevelSpec, theta: np.ndarray, *, lower: np.ndarray, upper: np.ndarray,
-                 callback=None, start: int = 0) -> OptimizeResult:
-        """Run the chosen optimiser on level ``li``'s objective from ``theta`` (SPSA gains from iteration ``start``)."""
+                 callback=None, start: int = 0, objective: Objective | None = None) -> OptimizeResult:
+        """Run the chosen optimiser on level ``li``'s objective (or ``objective`` at that level) from ``theta``
+        (SPSA gains from iteration ``start``)."""
         level, o = self.levels[li], self.params.optimizer
+        objective = level.objective if objective is None else objective
         f = level.factor
         if o.name == "spsa":
             settings = SPSASettings(
@@ -214,10 +224,10 @@ class _Run:
                 blocking=o.blocking, shrink=o.shrink, tol=o.tol * f,
                 average_last=min(o.average_last, spec.iterations), newton=o.newton, normalize=o.normalize,
                 c_step_ratio=o.c_step_ratio, start=start)
-            return spsa_maximize(level.objective, theta, settings, rng=self.rng, scales=self.scales, lower=lower,
+            return spsa_maximize(objective, theta, settings, rng=self.rng, scales=self.scales, lower=lower,
                                  upper=upper, callback=callback)
         settings = PowellSettings(max_evaluations=max(20, 4 * spec.iterations), xtol=0.02 * f, step=spec.step * f)
-        return powell_maximize(level.objective, theta, settings, scales=self.scales, lower=lower, upper=upper,
+        return powell_maximize(objective, theta, settings, scales=self.scales, lower=lower, upper=upper,
                                callback=callback)
 
     def schedule_from(self, theta: np.ndarray, done: int = 0) -> tuple[np.ndarray, int, str]:
@@ -234,33 +244,75 @@ class _Run:
                 start = min(done, spec.iterations - 1)
                 spec = spec.model_copy(update={"iterations": spec.iterations - start})
             res = self.optimize(li, spec, theta, lower=self.lower, upper=self.upper, callback=cb, start=start)
-            theta = res.theta
+            # a level never ends worse than it started (ITK's ReturnBestParametersAndValue, for the end points)
+            if self.levels[li].objective(res.theta) >= self.levels[li].objective(theta):
+                theta = res.theta
             total_iter += res.iterations
             stop = res.stop_reason
             self.history.append({"level": np.full(res.iterations, li), **res.history})
         return theta, total_iter, stop
 
-    def refine(self, start: np.ndarray) -> tuple[np.ndarray, float]:
-        """A short run of the first level from a probe (for the capture check; any angle)."""
+    def refine(self, start: np.ndarray, objective: Objective | None = None) -> tuple[np.ndarray, float]:
+        """A short run of the first level (or of ``objective`` there) from ``start``, any angle: the end and its value."""
+        objective = self.levels[0].objective if objective is None else objective
         spec = self.schedule[0].model_copy(update={"iterations": self.params.check.refine})
-        res = self.optimize(0, spec, start, lower=np.r_[self.lower[:2], -np.inf], upper=np.r_[self.upper[:2], np.inf])
-        return res.theta, self.levels[0].objective(res.theta)
+        res = self.optimize(0, spec, start, lower=np.r_[self.lower[:2], -np.inf], upper=np.r_[self.upper[:2], np.inf],
+                            objective=objective)
+        return res.theta, objective(res.theta)
 
-    def probes(self) -> list[np.ndarray]:
-        """Probe rotations spread over the full circle, each with the translation that maps the intensity centroids."""
-        out = []
-        for angle in np.linspace(-180.0, 180.0, self.params.check.probes, endpoint=False):
-            t = initial_translation(self.fixed, self.moving, "moments", angle)
-            out.append(np.array([t[0], t[1], angle]))
-        return out
+    def overlap_bound_check(self, theta: np.ndarray) -> list[str]:
+        """Is the result pressed against the overlap bound? From it, the first level's measure with half
+        the ``metric.min_overlap`` is climbed briefly; ending elsewhere, higher and with less overlap
+        than ``min_overlap`` means the true alignment probably overlaps less than accepted (a moving
+        image shifted out of view), and the result is the best transform on the bound, not the answer."""
+        coarse, m = self.levels[0].objective, self.params.metric.min_overlap
+        relaxed = coarse.with_min_overlap(0.5 * m)
+        here = relaxed(theta)
+        end, there = self.refine(theta, relaxed)
+        overlap = coarse.overlap(end)
+        if (overlap < m and math.isfinite(here) and there > here + self.params.check.margin * abs(here)
+                and self.distance(end, theta) >= 2.0 * self.levels[0].factor):
+            return [f"the measure keeps rising where the images overlap less than min_overlap "
+                    f"({m:.0%}): from the result it climbs to ({end[0]:.0f}, {end[1]:.0f}, {end[2]:+.0f} deg), "
+                    f"{overlap:.1%} overlap; the true alignment probably lies outside the accepted overlap"]
+        return []
 
-    def self_check(self, theta: np.ndarray, value: float, stop: str) -> tuple[list[str], np.ndarray | None]:
-        """Reasons to distrust a result (empty list: none), and the probe that beat it (or None).
+    def grid(self) -> GridSearch:
+        """The coarse exhaustive search (computed once): ``check.probes`` angles over the full circle x a
+        ``check.grid`` square of translations over the search box about the centroid-mapping translation."""
+        if self._grid is None:
+            self.search_images = SearchImages(self.fixed, self.moving, min_overlap=self.params.metric.min_overlap)
+            self._grid = grid_search(
+                self.search_images, lambda angle: initial_translation(self.fixed, self.moving, "moments", angle),
+                angles=self.params.check.probes, steps=self.params.check.grid, half_width=self.max_translation)
+        return self._grid
 
-        An iterate in the second half of a level on a search bound means that the level's optimum
-        lies beyond it (every point is clipped into the bounds). Each of the ``check.candidates``
-        best probes (leaving out the one nearest to the result's angle) is briefly optimised
-        (:meth:`refine`) before it is compared with the result.
+    def distance(self, a: np.ndarray, b: np.ndarray) -> float:
+        """RMS pixel displacement between two transforms, approximately: translation and arc at the RMS radius."""
+        arc = math.radians((a[2] - b[2] + 180.0) % 360.0 - 180.0) * self.radius
+        return math.hypot(math.hypot(*(a[:2] - b[:2])), arc)
+
+    def candidates(self, grid: GridSearch, theta: np.ndarray) -> list[np.ndarray]:
+        """The ``check.candidates`` best grid transforms outside the result's cell, one per cell."""
+        chosen: list[np.ndarray] = []
+        for i in np.argsort(-grid.values, kind="stable"):
+            probe = grid.thetas[i]
+            if not math.isfinite(grid.values[i]) or len(chosen) == self.params.check.candidates:
+                break
+            if all(self.distance(probe, other) >= grid.spacing for other in [theta, *chosen]):
+                chosen.append(probe)
+        return chosen
+
+    def self_check(self, theta: np.ndarray, value: float,
+                   stop: str) -> tuple[list[str], tuple[np.ndarray, str] | None]:
+        """Reasons to distrust a result (empty list: none), and a better result found by the capture
+        check (its theta and stop reason), or None.
+
+        Checks, in order: the optimiser started; the overlap; the search bounds; and with
+        ``check.capture`` the coarse search (:mod:`~topomatch.stages.registration.search`): the
+        content overlap, the prominence, and the ``check.candidates`` best grid transforms away from
+        the result, each refined (:meth:`refine`) and, if one beats the result at the first level,
+        run through the whole schedule to confirm it at full resolution.
         """
         params, levels, check = self.params, self.levels, self.params.check
         problems: list[str] = []
@@ -270,45 +322,58 @@ class _Run:
                             f"enough at the initial transform or carry no information")
         if not math.isfinite(value):
             overlap = levels[-1].objective.overlap(theta)
-            problems.append(f"only {overlap:.0%} of the fixed image overlaps the moving image at the result "
+            problems.append(f"only {overlap:.1%} of the fixed image overlaps the moving image at the result "
                             f"(min_overlap {params.metric.min_overlap:.0%})")
             return problems, None
-        lower, upper = self.lower, self.upper
-        span = upper - lower
-        visited = np.vstack([np.atleast_2d(theta)]
-                            + [h["theta"].reshape(-1, 3)[len(h["theta"]) // 2:] for h in self.history])
-        at_bound = np.any((visited <= lower + 1e-6 * span) | (visited >= upper - 1e-6 * span), axis=0)
+        # clipped iterates pile up on a bound when the optimum lies beyond it: flag a result within
+        # one pixel (translation, or arc at the RMS radius) of a bound
+        tol = np.array([1.0, 1.0, math.degrees(1.0 / self.radius)])
+        at_bound = (theta <= self.lower + tol) | (theta >= self.upper - tol)
         if at_bound.any():
             names = [n for n, b in zip(("tx", "ty", "angle"), at_bound) if b]
             problems.append(f"the estimate is on the search bound of {', '.join(names)} (max_translation / "
                             f"max_angle): the misalignment is probably outside the capture range")
         if check.capture:
-            coarse = levels[0].objective
-            here = coarse(theta)
-            spacing = 360.0 / check.probes
-            scored = []
-            for probe in self.probes():
-                if abs((probe[2] - theta[2] + 180.0) % 360.0 - 180.0) < 0.5 * spacing:
-                    continue  # the result's own probe
-                scored.append((coarse(probe), probe[2], probe))
-            scored.sort(key=lambda t: (-t[0], t[1]))
+            problems += self.overlap_bound_check(theta)
+            here = levels[0].objective(theta)
+            grid = self.grid()
+            content = self.search_images.content_overlap(theta)
+            if content < check.min_content:
+                problems.append(f"only {content:.1%} of the fixed image's content (Otsu foreground) lands on the "
+                                f"moving image's content at the result (min_content {check.min_content:.0%}): "
+                                f"too little shared content to trust it")
+            prominence = grid.prominence(self.search_images.score(theta, min_overlap=0.0))  # overlap: checked above
+            if prominence < check.min_prominence:
+                problems.append(f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
+                                f"deviations above a typical transform of a coarse search (min_prominence "
+                                f"{check.min_prominence:g}); the images may share too little content to register")
             best_value, best_theta = -math.inf, None
-            r = rms_radius(self.fixed.shape)
-            for v, _, probe in scored[: max(1, check.candidates)]:
+            for probe in self.candidates(grid, theta):
+                v = levels[0].objective(probe)
                 if check.refine > 0 and math.isfinite(v):
                     probe, v = self.refine(probe)
                     # a refined probe that came back to the result (within 2 coarse pixels RMS) is its basin
-                    d = math.hypot(math.hypot(*(probe[:2] - theta[:2])),
-                                   math.radians((probe[2] - theta[2] + 180.0) % 360.0 - 180.0) * r)
-                    if d < 2.0 * levels[0].factor:
+                    if self.distance(probe, theta) < 2.0 * levels[0].factor:
                         continue
                 if v > best_value:
                     best_value, best_theta = v, probe
             if math.isfinite(best_value) and (not math.isfinite(here) or best_value > here + check.margin * abs(here)):
-                winner = best_theta
-                problems.append(f"a start at {best_theta[2]:+.0f} deg reaches a higher value than the result "
-                                f"({best_value:.4g} > {here:.4g} at factor {levels[0].factor}): the registration "
-                                f"stopped in a local optimum; the misalignment is probably outside the capture range")
+                # a better start at the coarsest level; confirmed only if it also ends higher at full
+                # resolution (coarse levels of small images can prefer a wrong basin)
+                if np.all(best_theta >= self.lower) and np.all(best_theta <= self.upper):
+                    end, _, end_stop = self.schedule_from(best_theta, done=check.refine)
+                    confirmed = (levels[-1].objective(end) > value
+                                 and self.distance(end, theta) >= 2.0 * levels[0].factor)
+                    winner = (end, end_stop) if confirmed else None
+                    where = f"and ends at ({end[0]:.1f}, {end[1]:.1f}, {end[2]:+.1f} deg) higher at full resolution"
+                else:
+                    confirmed = levels[-1].objective(best_theta) > value
+                    where = "outside the search bounds (max_translation / max_angle)"
+                if confirmed:
+                    problems.append(f"a start at ({best_theta[0]:.0f}, {best_theta[1]:.0f}, {best_theta[2]:+.0f} deg) "
+                                    f"reaches a higher value than the result ({best_value:.4g} > {here:.4g} at factor "
+                                    f"{levels[0].factor}) {where}: the registration stopped in a local optimum; "
+                                    f"the misalignment is probably outside the capture range")
         return problems, winner
 
 

@@ -178,7 +178,10 @@ def spsa_maximize(f: Callable[[np.ndarray], float], theta0, settings: SPSASettin
             return None, -math.inf
         if len(gs) == 1:
             return gs[0], ys[0]
-        return sum(gs) / len(gs), sum(ys) / len(ys)
+        with np.errstate(invalid="ignore"):
+            g = np.sum(gs, axis=0) / len(gs)
+        g[np.isnan(g)] = 0.0  # opposite "away from the invalid side" pushes cancel: no information
+        return g, sum(ys) / len(ys)
 
     # --- gain calibration ----------------------------------------------------------------------
     # First-step gain a0 = a / (A + 1)^alpha. From `calibration` perturbation pairs at the start:

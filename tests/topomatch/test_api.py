@@ -62,6 +62,16 @@ def test_skeleton_options_and_errors(tmp_path):
     assert len(files) == 5
 
 
+def test_a_non_manifold_mesh_is_skeletonised_with_a_warning(capsys):
+    V = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    F = np.array([[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]])
+    # two octahedra sharing one vertex: a non-manifold vertex, nothing to repair
+    pinched = topomatch.Mesh(np.vstack([V, V + [2, 0, 0]]), np.vstack([F, np.where(F == 1, 0, F + 6)]), name="pinched")
+    s = topomatch.skeleton(pinched)
+    assert len(s.warnings) == 1 and "1 non-manifold vertices" in s.warnings[0]
+    assert topomatch.skeleton(BUNDLED_MESHES / "torus.off").warnings == []
+
+
 def test_match_equals_the_command(capsys):
     a, b = BUNDLED_MESHES / "odedstein_human_man.obj.gz", BUNDLED_MESHES / "odedstein_human_woman.obj.gz"
     api = topomatch.match(a, b, method="srg")

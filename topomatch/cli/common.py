@@ -25,7 +25,7 @@ def print_result(summary: dict[str, Any], *, as_json: bool, keys: Iterable[str] 
     if as_json:
         print(json.dumps(summary))
         return
-    shown = [k for k in (keys or summary) if k in summary and summary[k] not in ("", None)]
+    shown = [k for k in (keys or summary) if k in summary and summary[k] not in ("", None, [])]
     width = max((len(k) for k in shown), default=0)
     for key in shown:
         print(f"{key:>{width}}: {summary[key]}")

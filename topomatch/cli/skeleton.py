@@ -8,6 +8,7 @@ as GraphML, JSON and an OBJ polyline, the unpruned Reeb graph as GraphML, and a 
 from __future__ import annotations
 
 import argparse
+import sys
 
 from topomatch.cli.common import command, print_result
 from topomatch.pipeline.cli_options import add_options, given_options
@@ -47,4 +48,6 @@ def cmd_skeleton(args: argparse.Namespace) -> int:
     if args.out:
         summary["files"] = write_skeleton_files(result, args.out)
     print_result(summary, as_json=args.json)
+    for warning in result.warnings:
+        print(f"topomatch: warning: {args.mesh}: {warning}", file=sys.stderr)
     return 0

@@ -126,6 +126,21 @@ def test_nothing_left_is_an_input_error():
         clean_mesh(Mesh(V, np.zeros((0, 3), np.int64), name="nofaces"))
 
 
+@pytest.mark.parametrize("scale, word", [(1e300, "overflow"), (1e-300, "underflow")])
+def test_a_mesh_out_of_double_precision_range_is_refused_by_its_size(shapes, scale, word):
+    octa = shapes.octahedron()
+    with pytest.raises(InputError, match=rf"the mesh is 2e[+-]300 units across: .* {word} double precision"):
+        clean_mesh(Mesh(octa.V * scale, octa.F, name="scaled"))
+    # inside the range the octahedron is cleaned unchanged, whatever its size
+    for ok in (1e-45, 1e45):
+        assert clean_mesh(Mesh(octa.V * ok, octa.F, name="scaled")).after.genus == 0
+
+
+def test_a_mesh_at_one_point_is_refused():
+    with pytest.raises(InputError, match="all vertices are at one point"):
+        clean_mesh(Mesh(np.zeros((3, 3)), np.array([[0, 1, 2]]), name="point"))
+
+
 @pytest.mark.parametrize("name", ["torus.off", "eight_genus2.off", "odedstein_hand_lowres.obj.gz"])
 def test_clean_meshes_pass_unchanged(bundled_mesh, name):
     mesh = bundled_mesh(name)

@@ -73,3 +73,9 @@ def test_morse_stage_dispatches_to_fiedler(bundled_mesh):
     f = morse(mesh, params=MorseParams(function="fiedler")).function
     np.testing.assert_array_equal(f.values, fiedler_function(mesh).values)
     assert f.kind == "fiedler"
+
+
+def test_a_single_triangle_is_too_small_for_a_spectral_function():
+    tri = Mesh(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2]]), name="tri")
+    with pytest.raises(InputError, match="tri: the mesh has 3 vertices and 1 faces: too few for 3 Laplace"):
+        fiedler(tri, params=FiedlerParams())

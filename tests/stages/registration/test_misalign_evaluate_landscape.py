@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from topomatch.pipeline.errors import StageError
-from topomatch.stages.registration.evaluate import EvaluateParams, evaluate_registration, truth_transform
+from topomatch.stages.registration.evaluate import EvaluateParams, evaluate_registration
 from topomatch.stages.registration.landscape import LandscapeParams, scan
 from topomatch.stages.registration.misalign import MisalignParams, misalign, misalign_pair, random_cases
 from topomatch.stages.registration.register import Registration
-from topomatch.stages.registration.transform import RigidTransform, grid_points
+from topomatch.stages.registration.transform import RigidTransform
 
 
 def _registration(transform, ok=True):
@@ -68,14 +68,6 @@ def test_angle_error_wraps():
     im = Image(np.random.default_rng(0).random((10, 10)))
     ev = evaluate_registration(im, _registration(RigidTransform.for_image(im.shape, 0, 0, 179.0)), {"angle": -179.0})
     assert ev.d_angle == pytest.approx(-2.0)
-
-
-def test_truth_about_itks_centre(pd_slice):
-    t = truth_transform({"tx": 0, "ty": 0, "angle": 10}, pd_slice, "itk")
-    H, W = pd_slice.shape
-    same = RigidTransform(0.0, 0.0, 10.0, (W / 2, H / 2))
-    np.testing.assert_allclose(t.apply(grid_points(pd_slice.shape)), same.apply(grid_points(pd_slice.shape)))
-    assert t.center == pd_slice.center and (t.tx, t.ty) == pytest.approx((0.0937, -0.0790), abs=1e-3)
 
 
 def test_truth_errors(pd_slice):
