@@ -10,8 +10,7 @@ compare like with like on this machine):
 1. **ITK cases** (bundled ``registration_pairs.csv``, scored against the ``consensus_*`` columns,
    about ((W-1)/2, (H-1)/2)): mean TRE of Jensen-Tsallis + SPSA for ``--seeds`` seeds (max over
    seeds), of Powell on the same objective, and of SimpleITK's Mattes MI with two optimisers
-   (conjugate gradient with line search; regular-step gradient descent). The Rotated10 row is
-   also scored with its truth read about ITK's centre (W/2, H/2) (see docs/registration.md).
+   (conjugate gradient with line search; regular-step gradient descent).
 2. **Accuracy sweep**: ``--cases`` random misalignments (|tx|, |ty| <= 20 px, |angle| <= 25 deg,
    seed 2024) of PD -> PD and T1 (fixed) vs PD (moved), 181 x 217 pixels: success rate (mean TRE
    <= 1 px), median TRE and seconds per case for JT, JR, MI and Tsallis MI with SPSA, and both

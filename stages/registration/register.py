@@ -189,8 +189,14 @@ class _Run:
         smallest = min(min(fixed.shape), min(moving.shape))
         # levels too coarse for a small image are skipped: below MIN_LEVEL_SIDE pixels a side the
         # histogram holds too few samples for a gradient estimate and SPSA random-walks
-        self.schedule = ([lv for lv in params.schedule if smallest // lv.factor >= MIN_LEVEL_SIDE]
-                         or [params.schedule[-1].model_copy(update={"factor": 1})])
+        kept = [lv for lv in params.schedule if smallest // lv.factor >= MIN_LEVEL_SIDE]
+        skipped = params.schedule[: len(params.schedule) - max(1, len(kept))]  # the coarsest levels
+        if not kept:
+            kept = [params.schedule[-1].model_copy(update={"factor": 1})]
+        if skipped:  # the first kept level also does the skipped levels' work: it wins the capture range now
+            extra = sum(lv.iterations for lv in skipped)
+            kept[0] = kept[0].model_copy(update={"iterations": kept[0].iterations + extra})
+        self.schedule = kept
         m = params.metric
         self.levels: list[Level] = build_pyramid(
             fixed, moving, factors=[lv.factor for lv in self.schedule], bins=[lv.bins for lv in self.schedule],
