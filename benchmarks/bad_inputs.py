@@ -24,16 +24,15 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "badinput"))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from corpus import all_cases, command_line, make_assets, write_files  # noqa: E402
+from badinput.corpus import all_cases, command_line, make_assets, write_files  # noqa: E402
 
 
 def measure(argv: list[str], cwd: Path) -> dict:
     """Exit status, output, seconds and peak RSS (MB) of ``python -m topomatch argv``."""
     env = dict(os.environ)
     env.pop("TOPOMATCH_DATA_ROOT", None)
-    env["PYTHONWARNINGS"] = "ignore"
     t0 = time.perf_counter()
     with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
         proc = subprocess.Popen([sys.executable, "-m", "topomatch", *argv], stdout=out, stderr=err, cwd=cwd, env=env)

@@ -31,12 +31,15 @@ from collections import Counter
 from pathlib import Path
 
 import numpy as np
-
-import topomatch
 from topomatch.pipeline.paths import data_root
 from topomatch.stages.registration.interpolation import downsample
 from topomatch.stages.registration.misalign import moved
-from topomatch.stages.registration.transform import RigidTransform, target_registration_error
+from topomatch.stages.registration.transform import (
+    RigidTransform,
+    target_registration_error,
+)
+
+import topomatch
 
 ITK = Path(__file__).resolve().parent.parent / "data" / "images" / "itk"
 

@@ -31,10 +31,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
-
+from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.errors import ConfigError, InputError
 from topomatch.pipeline.params import Params, validate_json_strict
-from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.paths import display_path, resolve_input
 from topomatch.pipeline.registry import get_report, get_stage
 from topomatch.pipeline.yaml_loading import load_yaml
@@ -230,10 +229,15 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
         raise InputError(path, "config file not found")
     try:
         if path.stat().st_size > 4 * 2**20:
-            raise InputError(path, "config file larger than 4 MiB: refused")
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(path, f"cannot read config ({exc})") from None
+            raise ConfigError(f"{path}: config file larger than 4 MiB: refused")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(path, f"cannot read config ({exc.strerror or exc})") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start}): a config "
+                          f"is a YAML text file") from None
     try:
         data = load_yaml(text)
     except ConfigError as exc:

@@ -25,14 +25,18 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from tqdm import tqdm
-
-from topomatch.pipeline.files import atomic_write_text
 from topomatch.pipeline.config import Experiment
 from topomatch.pipeline.executors import execute
+from topomatch.pipeline.files import atomic_write_text
 from topomatch.pipeline.item import ItemResult
 from topomatch.pipeline.manifest import build_manifest
-from topomatch.pipeline.reports import write_report_outputs, write_index_html, write_table, run_reports
+from topomatch.pipeline.reports import (
+    run_reports,
+    write_index_html,
+    write_report_outputs,
+    write_table,
+)
+from tqdm import tqdm
 
 DEFAULT_OUT = Path("runs")
 CACHE_DIRNAME = ".cache"
@@ -75,6 +79,10 @@ def run_experiment(
         Show a progress bar on stderr.
     """
     out_root = Path(out_root)
+    cache_root = None
+    if use_cache:  # made first: an unusable cache folder stops the run before anything is written
+        cache_root = str(Path(cache_dir) if cache_dir is not None else out_root / CACHE_DIRNAME)
+        Path(cache_root).mkdir(parents=True, exist_ok=True)
     run_dir = out_root / f"{experiment.name}-{experiment.content_hash()}"
     run_dir.mkdir(parents=True, exist_ok=True)
     marker = run_dir / INCOMPLETE
@@ -82,9 +90,6 @@ def run_experiment(
                               f"(process {os.getpid()}) and has not finished: it is running, or it was killed or "
                               "interrupted. Its finished stages are cached: run the same command again to resume; "
                               "this file is removed when the run completes.\n")
-    cache_root = None
-    if use_cache:
-        cache_root = str(Path(cache_dir) if cache_dir is not None else out_root / CACHE_DIRNAME)
     atomic_write_text(run_dir / "config.yaml", yaml.safe_dump(experiment.resolved(), sort_keys=False))
 
     items = experiment.items()

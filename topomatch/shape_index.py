@@ -132,6 +132,11 @@ class ShapeIndex:
                                 "FROM shapes LIMIT 1").fetchall()
             else:
                 self.db = sqlite3.connect(self.path, timeout=BUSY_SECONDS)
+                tables = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
+                if tables - {"shapes"}:  # someone else's database: never add our table to it
+                    self.db.close()
+                    raise InputError(self.path, f"not a topomatch index: a SQLite database with other tables "
+                                                f"({', '.join(sorted(tables)[:5])}); choose another --db")
                 self.db.executescript(SCHEMA)
         except sqlite3.Error as exc:
             raise InputError(self.path, _problem(exc)) from None

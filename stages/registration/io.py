@@ -21,8 +21,13 @@ from pathlib import Path
 
 import numpy as np
 from pydantic import Field
-
-from topomatch.pipeline.contract import InputError, Params, StageResult, check_readable_file, stage
+from topomatch.pipeline.contract import (
+    InputError,
+    Params,
+    StageResult,
+    check_readable_file,
+    stage,
+)
 from topomatch.stages.registration.image import Image
 
 PILLOW_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
@@ -48,7 +53,8 @@ def _stem(path: Path) -> str:
 
 
 def _read_pillow(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
-    from PIL import Image as PILImage, UnidentifiedImageError
+    from PIL import Image as PILImage
+    from PIL import UnidentifiedImageError
 
     try:
         with PILImage.open(path) as im:
@@ -136,7 +142,8 @@ def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...]]:
     return arr, spacing
 
 
-def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 0) -> Image:
+def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 0,
+               strict_slice: bool = True) -> Image:
     """Read a 2D image (or one slice of a volume) as float64 ``[row, col]`` with its spacing.
 
     Parameters
@@ -146,7 +153,8 @@ def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 
         (``.mha``, ``.mhd``) or NRRD file.
     slice_index : int, optional
         For a 3D volume: the slice to take along ``axis`` (negative counts from the end).
-        Ignored for 2D images, so one config can mix slices and PNGs.
+        For a 2D image an error, unless ``strict_slice`` is False (then ignored: the
+        ``load_image`` stage, so that one config can mix slices and PNGs).
     axis : {0, 1, 2}
         Axis of the volume's ``(k, j, i)`` array (SimpleITK order) that ``slice_index`` indexes.
 
@@ -163,16 +171,17 @@ def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 
     """
     path = Path(path)
     arr, spacing = read_array(path)
-    return _image_from_array(path, arr, spacing, slice_index, axis)
+    return _image_from_array(path, arr, spacing, slice_index, axis, strict_slice)
 
 
 def _image_from_array(path: Path, arr: np.ndarray, spacing: tuple[float, ...], slice_index: int | None,
-                      axis: int) -> Image:
+                      axis: int, strict_slice: bool = True) -> Image:
     source = str(path)
     if arr.ndim == 3:
         if slice_index is None:
             raise InputError(path, f"is a 3D volume of shape {arr.shape} (slices, rows, cols); registration is 2D: "
-                                   f"choose a slice (load_image.slice, load_pair.fixed_slice / moving_slice)")
+                                   f"choose a slice (--fixed-slice / --moving-slice; in a config load_image.slice, "
+                                   f"load_pair.fixed_slice / moving_slice)")
         n = arr.shape[axis]
         if not -n <= slice_index < n:
             raise InputError(path, f"slice {slice_index} is out of range: the volume has {n} slices along axis "
@@ -180,8 +189,12 @@ def _image_from_array(path: Path, arr: np.ndarray, spacing: tuple[float, ...], s
         arr = np.take(arr, slice_index, axis=axis)
         spacing = tuple(s for a, s in enumerate(spacing) if a != axis)
         source = f"slice {slice_index % n} (axis {axis}) of {path}"
+    elif arr.ndim == 2 and slice_index is not None and strict_slice:
+        raise InputError(path, f"is a 2D image ({arr.shape[0]} x {arr.shape[1]} pixels): a slice ({slice_index}) "
+                               f"applies only to a 3D volume; leave the slice out")
     if arr.ndim != 2:
-        raise InputError(path, f"expected a 2D image, got an array of shape {arr.shape}")
+        raise InputError(path, f"is a {arr.ndim}D image of shape {arr.shape}: only 2D images and slices of 3D "
+                               f"volumes can be registered")
     data = check_pixels(arr, path)
     return Image(data, (spacing[0], spacing[1]), _stem(path), source)
 
@@ -255,7 +268,8 @@ class LoadPairResult(StageResult):
 @stage("load_image", params=LoadImageParams, version=1, consumes=("path",), produces=("image",))
 def load_image(path: str, *, params: LoadImageParams) -> LoadImageResult:
     """Read one 2D image (PNG, TIFF, NIfTI, DICOM, MetaImage), or one slice of a volume."""
-    return LoadImageResult(read_image(path, slice_index=params.slice, axis=params.axis))
+    # a config's slice applies to its volumes; its 2D images are read whole (inputs may mix both)
+    return LoadImageResult(read_image(path, slice_index=params.slice, axis=params.axis, strict_slice=False))
 
 
 @stage("load_pair", params=LoadPairParams, version=1, consumes=("fixed_path", "moving_path"),
@@ -271,7 +285,7 @@ def load_pair(fixed_path: str, moving_path: str, *, params: LoadPairParams) -> L
         raise InputError(vol, f"the {role} image is {dims[vol][0]}D ({'x'.join(map(str, (ma if vol == moving_path else fa).shape))}) "
                               f"but the {'fixed' if role == 'moving' else 'moving'} image {flat.name} is "
                               f"{dims[flat][0]}D: images of different dimensionality cannot be registered; "
-                              f"give load_pair.{role}_slice to take a 2D slice")
+                              f"give --{role}-slice (load_pair.{role}_slice in a config) to take a 2D slice")
     fixed = _image_from_array(fixed_path, fa, fs, params.fixed_slice, params.axis)
     moving = _image_from_array(moving_path, ma, ms, params.moving_slice, params.axis)
     return LoadPairResult(fixed, moving)

@@ -196,7 +196,7 @@ def mesh_cases() -> list[Case]:
         ("obj-missing-vertex", "m.obj", _obj(V, [[1, 3, 5], [1, 2, 40]]), r"m\.obj: "),
         ("obj-no-faces", "m.obj", _obj(V, []), r"m\.obj: .*(no faces|faces)"),
         ("obj-two-vertex-face", "m.obj", _obj(V, [[1, 3, 5], [1, 2]]), r"m\.obj: "),
-        ("obj-nan", "m.obj", _obj([["nan", 0, 0]] + V[1:], [[1, 3, 5], [2, 3, 5]]), r"m\.obj: .*(NaN|nan|finite)"),
+        ("obj-nan", "m.obj", _obj([["nan", 0, 0]] + V[1:], [[1, 3, 5], [2, 3, 5]]), r"m\.obj: .*(NaN|nan|finite|line 1)"),
         ("obj-garbage", "m.obj", "this is not a mesh\n" * 20, r"m\.obj: "),
         ("ply-huge-count", "m.ply", _ply_binary(1_000_000_000, 1, b"\0" * 64), r"m\.ply: "),
         ("ply-truncated-binary", "m.ply", _ply_binary(6, 8, b"\0" * 30), r"m\.ply: "),
@@ -212,10 +212,10 @@ def mesh_cases() -> list[Case]:
     del sk
     out += [
         Case("mesh-missing", "mesh", ["skeleton", "{d}/none.off"], 1, r"none\.off: file not found"),
-        Case("mesh-directory", "mesh", ["skeleton", "{d}"], 1, r"(is a directory|not a file|folder)"),
+        Case("mesh-directory", "mesh", ["skeleton", "{d}"], 1, r"not a regular file"),
         Case("mesh-match-one-bad", "mesh", ["match", "{meshes}/torus.off", "{d}/m.off"], 1, r"m\.off: ",
              {"m.off": "OFF\n3 1 0\n0 0 0\n"}),
-        Case("mesh-query-bad", "mesh", ["query", "{d}/m.off", "--db", "{db}"], 1, r"m\.off: ",
+        Case("mesh-query-bad", "mesh", ["query", "{d}/m.off", "--db", "{db}", "--method", "d2"], 1, r"m\.off: ",
              {"m.off": "OFF\n3 1 0\n0 0 0\n"}, needs=("db",)),
         Case("mesh-index-some-bad", "mesh", ["index", "{d}/in", "--db", "{d}/x.db", "--method", "d2"], 1,
              r"(1 failed|failed).*", {"in/bad.off": "OFF\n3 1 0\n0 0 0\n", "in/good.off": OCTAHEDRON}),
@@ -280,7 +280,7 @@ def config_cases() -> list[Case]:
         ("report-unknown", _with(reports=["pie_chart"]), 2, r"pie_chart"),
         ("report-bad-params", _with(reports=[{"table": {"name": 3, "columns": "x"}}]), 2, r"table"),
         ("inputs-missing-file", _with(inputs={"meshes": ["{d}/none.off"]}), 1, r"none\.off"),
-        ("inputs-glob-nothing", _with(inputs={"meshes": ["{d}/*.nothing"]}), 2, r"(nothing|match|no files)"),
+        ("inputs-glob-nothing", _with(inputs={"meshes": ["{d}/*.nothing"]}), 1, r"no file matches this pattern"),
         ("inputs-wrong-type", _with(inputs={"meshes": 42}), 2, r"meshes"),
         ("name-not-string", _with(name=["a"]), 2, r"name"),
         ("executor-unknown", _with(executor={"kind": "quantum"}), 2, r"quantum"),
@@ -304,11 +304,11 @@ def config_cases() -> list[Case]:
              r"merge_tolerance", ok),
         Case("config-set-absent-stage", "config", ["run", "{d}/c.yaml", "--set", "noise.sigma=0.1"], 2, r"noise", ok),
         Case("config-out-is-file", "config", ["run", "{d}/c.yaml", "--out", "{d}/ok.off", "--no-progress"], 1,
-             r"ok\.off: .*(file is in the way|Not a directory|exists)", ok),
+             r"ok\.off/.*a file is in the way", ok),
         Case("config-out-proc", "config", ["run", "{d}/c.yaml", "--out", "/proc/topomatch", "--no-progress"], 1,
              r"/proc/topomatch", ok),
         Case("config-cache-dev-null", "config", ["run", "{d}/c.yaml", "--out", "{d}/out", "--cache-dir",
-                                                 "/dev/null/cache", "--no-progress"], 1, r"/dev/null", ok),
+                                                 "/dev/null/cache", "--no-progress"], 1, r"/dev/null.*a file is in the way", ok),
         Case("config-bad-mesh-item", "config", ["run", "{d}/c.yaml", "--out", "{d}/out", "--no-progress"], 1,
              r"1 of 2 items failed", {"c.yaml": _with(inputs={"meshes": ["{d}/ok.off", "{d}/bad.off"]}),
                                       "ok.off": OCTAHEDRON, "bad.off": "OFF\n3 1 0\n"}),
@@ -344,12 +344,12 @@ def image_cases() -> list[Case]:
         ("volume-slice-range", {"m.nii": _nifti(rng.random((20, 30, 10)).astype(np.float32))},
          ["{d}/m.nii", "--moving-slice", "10"], r"m\.nii: slice 10 is out of range"),
         ("4d", {"m.nii": _nifti(rng.random((10, 12, 5, 3)).astype(np.float32))}, ["{d}/m.nii", "--moving-slice", "1"],
-         r"m\.nii: .*(4D|dimension)"),
+         r"m\.nii: is a 4D image"),
         ("nii-truncated", {"m.nii": lambda p: (_nifti(rng.random((30, 30)).astype(np.float32))(p), _truncate_half(p))},
          ["{d}/m.nii"], r"m\.nii: "),
         ("nii-garbage", {"m.nii": b"\0" * 400}, ["{d}/m.nii"], r"m\.nii: "),
         ("unsupported", {"m.xyz": b"abc"}, ["{d}/m.xyz"], r"m\.xyz: "),
-        ("directory", {"sub/x.txt": "x"}, ["{d}/sub"], r"sub: .*(directory|not a file|folder)"),
+        ("directory", {"sub/x.txt": "x"}, ["{d}/sub"], r"sub: not a regular file"),
         ("noise-flagged", {"m.png": noise}, ["{d}/m.png"], r"registration flagged"),
         ("shifted-out-of-view", {"m.png": _shifted_pd(150, 45)}, ["{d}/m.png"], r"registration flagged: .*content"),
     ]
@@ -358,7 +358,7 @@ def image_cases() -> list[Case]:
         out.append(Case(f"image-{cid}", "image", ["register", fixed, *moving], 1, message, files or {}))
     out += [
         Case("image-fixed-slice-on-2d", "image", ["register", fixed, fixed, "--fixed-slice", "2"], 1,
-             r"(2D|slice)"),
+             r"is a 2D image .*applies only to a 3D volume"),
         Case("image-out-is-file", "image", ["register", fixed, fixed, "--out", "{d}/f.txt"], 1,
              r"f\.txt: .*(file is in the way|Not a directory|exists)", {"f.txt": "x"}),
         Case("image-dims-differ", "image", ["register", fixed, "{d}/m.nii", "--moving-slice", "-1"], 1, r"(3D|2D|slice)",
@@ -415,7 +415,7 @@ def cli_cases() -> list[Case]:
         ("skeleton-out-is-file", ["skeleton", torus, "--out", "{d}/f.txt"], 1,
          r"f\.txt: .*(file is in the way|Not a directory|exists)"),
         ("skeleton-out-proc", ["skeleton", torus, "--out", "/proc/topomatch-out"], 1, r"/proc/topomatch-out"),
-        ("evaluate-out-is-file", ["evaluate", "--db", "{db}", "--out", "{d}/f.txt/x"], 1, r"f\.txt"),
+        ("evaluate-out-is-file", ["evaluate", "--db", "{db}", "--method", "d2", "--out", "{d}/f.txt/x"], 1, r"f\.txt"),
     ]
     out = []
     for cid, argv, code, message in rows:
@@ -455,7 +455,8 @@ def database_cases() -> list[Case]:
     ]
     for cid, damage, message in damaged:
         for command in ("query", "evaluate"):
-            argv = ["query", torus, "--db", "{db}"] if command == "query" else ["evaluate", "--db", "{db}"]
+            argv = ["query", torus, "--db", "{db}", "--method", "d2"] if command == "query" else [
+                "evaluate", "--db", "{db}", "--method", "d2"]
             out.append(Case(f"database-{command}-{cid}", "database", argv, 1, message, {"@db": damage}, ("db",)))
     return out
 
@@ -522,11 +523,13 @@ def make_assets(root: Path, run_command: Callable[[list[str]], None]) -> dict[st
     meshes.mkdir(exist_ok=True)
     import shutil
 
-    for name in ("torus.off", "eight_genus2.off"):
+    names = ("torus.off", "eight_genus2.off", "odedstein_hand_lowres.obj.gz", "odedstein_hand_closed.obj.gz")
+    for name in names:
         shutil.copy(MESHES / name, meshes / name)
-    (root / "labels.csv").write_text("relative_path,class\ntorus.off,ring\neight_genus2.off,eight\n")
+    (meshes / "labels.csv").write_text("relative_path,class\ntorus.off,handles\neight_genus2.off,handles\n"
+                                       "odedstein_hand_lowres.obj.gz,hand\nodedstein_hand_closed.obj.gz,hand\n")
     run_command(["index", str(meshes), "--db", str(root / "shared.db"), "--method", "d2",
-                 "--labels", str(root / "labels.csv"), "--no-progress"])
+                 "--labels", str(meshes / "labels.csv"), "--no-progress"])
     run_root = root / "run"
     run_root.mkdir(exist_ok=True)
     (run_root / "ok.off").write_text(OCTAHEDRON)
