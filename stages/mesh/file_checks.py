@@ -53,30 +53,71 @@ class FileFacts:
     polygons: int
 
 
+#: Largest decompression ratio of a gzipped mesh past its first :data:`RATIO_FREE_BYTES` (text meshes
+#: compress 3-8x; a much higher ratio is a decompression bomb, not a mesh).
+MAX_RATIO = 100
+RATIO_FREE_BYTES = 16 * 2**20
+
+_BOM = b"\xef\xbb\xbf"
+
+
 @contextlib.contextmanager
 def plain_file(path: Path, fmt: str) -> Iterator[Path]:
-    """Yield a path to the uncompressed content of ``path`` (decompressed with a size cap)."""
+    """Yield a path to the uncompressed content of ``path``: decompressed with a size and a ratio cap,
+    without a UTF-8 byte-order mark, and normalised where the readers are stricter than the
+    formats (:func:`_without_preamble`)."""
     limit = max_bytes()
-    if path.suffix.lower() != ".gz":
-        if path.stat().st_size > limit:
+    with tempfile.TemporaryDirectory(prefix="topomatch-") as tmp:
+        plain = path
+        if path.suffix.lower() == ".gz":
+            plain = Path(tmp) / f"mesh{fmt}"
+            _gunzip(path, plain, limit)
+        elif path.stat().st_size > limit:
             raise InputError(path, f"file is {path.stat().st_size / 2**20:.0f} MiB, above the {limit / 2**20:.0f} MiB "
                                    "limit for a mesh (set TOPOMATCH_MAX_MESH_BYTES to raise it)")
-        yield path
-        return
-    with tempfile.TemporaryDirectory(prefix="topomatch-") as tmp:
-        plain = Path(tmp) / f"mesh{fmt}"
-        written = 0
-        try:
-            with gzip.open(path, "rb") as src, open(plain, "wb") as dst:
-                while block := src.read(1 << 20):
-                    written += len(block)
-                    if written > limit:
-                        raise InputError(path, f"decompresses to more than {limit / 2**20:.0f} MiB, the limit for "
-                                               "a mesh (set TOPOMATCH_MAX_MESH_BYTES to raise it)")
-                    dst.write(block)
-        except (OSError, EOFError) as exc:
-            raise InputError(path, f"cannot decompress gzip file ({exc})") from None
-        yield plain
+        yield _without_preamble(plain, fmt, Path(tmp) / f"plain{fmt}")
+
+
+def _gunzip(path: Path, plain: Path, limit: int) -> None:
+    packed = path.stat().st_size
+    written = 0
+    try:
+        with gzip.open(path, "rb") as src, open(plain, "wb") as dst:
+            while block := src.read(1 << 20):
+                written += len(block)
+                if written > limit:
+                    raise InputError(path, f"decompresses to more than {limit / 2**20:.0f} MiB, the limit for "
+                                           "a mesh (set TOPOMATCH_MAX_MESH_BYTES to raise it)")
+                if written > RATIO_FREE_BYTES and written > MAX_RATIO * packed:
+                    raise InputError(path, f"decompresses more than {MAX_RATIO} times ({packed} bytes to over "
+                                           f"{written / 2**20:.0f} MiB): a decompression bomb, not a mesh")
+                dst.write(block)
+    except (OSError, EOFError) as exc:
+        raise InputError(path, f"cannot decompress gzip file ({exc})") from None
+
+
+def _without_preamble(plain: Path, fmt: str, copy: Path) -> Path:
+    """``plain``, or a copy of it without a leading UTF-8 byte-order mark, for OFF without the
+    comment and blank lines before the header, and for an upper-case ASCII STL in lower case (the
+    readers know only lower-case keywords)."""
+    with open(plain, "rb") as fh:
+        head = fh.read(1 << 16)
+    skip = len(_BOM) if head.startswith(_BOM) else 0
+    if fmt == ".off":
+        while True:
+            line_end = head.find(b"\n", skip)
+            line = head[skip:line_end if line_end >= 0 else len(head)].strip()
+            if line_end < 0 or (line and not line.startswith(b"#")):
+                break
+            skip = line_end + 1
+    upper_stl = fmt == ".stl" and head[skip:].lstrip()[:5] == b"SOLID" and b"FACET" in head
+    if skip == 0 and not upper_stl:
+        return plain
+    with open(plain, "rb") as src, open(copy, "wb") as dst:
+        src.seek(skip)
+        while block := src.read(1 << 20):
+            dst.write(block.lower() if upper_stl else block)
+    return copy
 
 
 def _content_lines(data: bytes) -> list[bytes]:
@@ -116,6 +157,19 @@ def _face_sizes(face_lines: list[bytes], path: Path, line_offset: int) -> int:
     return polygons
 
 
+_HUGE_INT = re.compile(rb"(?:^|(?<=\s))-?\d{10,}(?=\s|$)", re.MULTILINE)
+
+
+def _check_index_width(face_block: bytes, path: Path, n_vertices: int | None) -> None:
+    """Refuse a face index too wide for the readers' 32-bit integers (they wrap it silently to a
+    valid-looking index); ``face_block`` holds the face lines."""
+    m = _HUGE_INT.search(face_block)
+    if m:
+        face = face_block.count(b"\n", 0, m.start()) + 1
+        having = f", but the file has {n_vertices} vertices" if n_vertices is not None else ""
+        raise InputError(path, f"face {face} refers to vertex {int(m.group())}, beyond a 32-bit index{having}")
+
+
 def check_off(plain: Path, path: Path) -> FileFacts:
     lines = _content_lines(plain.read_bytes())
     if not lines or not lines[0].split()[0].upper().endswith(b"OFF"):
@@ -137,6 +191,7 @@ def check_off(plain: Path, path: Path) -> FileFacts:
     if len(rest) > nv + nf:
         raise InputError(path, f"malformed OFF file: the header declares {nv} vertices and {nf} faces but "
                                f"{len(rest) - nv - nf} more lines follow (an under-counted header?)")
+    _check_index_width(b"\n".join(rest[nv:]), path, nv)
     return FileFacts(nv, nf, _face_sizes(rest[nv:], path, 2 + nv))
 
 
@@ -156,6 +211,7 @@ def check_obj(plain: Path, path: Path) -> FileFacts:
         polygons += len(refs) > 3
     if n_faces == 0:
         raise InputError(path, "OBJ file has no faces ('f' lines)")
+    _check_index_width(b"\n".join(m.group(1).replace(b"/", b" ") for m in _OBJ_FACE.finditer(data)), path, None)
     return FileFacts(None, n_faces, polygons)
 
 
@@ -172,31 +228,61 @@ def check_ply(plain: Path, path: Path) -> FileFacts:
         raise InputError(path, "malformed PLY file: no 'ply ... end_header' header")
     body_start = header.index(b"\n", end) + 1 if b"\n" in header[end:] else len(header)
     lines = header[:end].splitlines()
-    fmt = next((l.split()[1] for l in lines if l.startswith(b"format ")), b"")
-    elements: list[list] = []  # [name, count, min record bytes]
+    formats = [l.split()[1:2] for l in lines if l.split()[:1] == [b"format"]]
+    fmt = formats[0][0] if formats and formats[0] else b""
+    if fmt not in (b"ascii", b"binary_little_endian", b"binary_big_endian"):
+        raise InputError(path, "malformed PLY file: the header needs a line 'format ascii 1.0' (or "
+                               f"binary_little_endian / binary_big_endian), found {fmt.decode('latin-1')!r}"
+                               if formats else "malformed PLY file: the header has no 'format' line")
+    elements: list[list] = []  # [name, count, min record bytes, [is list, per property]]
     for line in lines:
         tokens = line.split()
         if tokens[:1] == [b"element"] and len(tokens) >= 3:
-            elements.append([tokens[1], _int(tokens[2], path, f"the count of element {tokens[1]!r}"), 0])
+            elements.append([tokens[1], _int(tokens[2], path, f"the count of element {tokens[1]!r}"), 0, []])
         elif tokens[:1] == [b"property"] and elements:
             if tokens[1:2] == [b"list"] and len(tokens) >= 5:  # a list: its count, then at least 3 items
                 elements[-1][2] += _PLY_SIZES.get(tokens[2], 1) + 3 * _PLY_SIZES.get(tokens[3], 4)
+                elements[-1][3].append(True)
             elif len(tokens) >= 3:
                 elements[-1][2] += _PLY_SIZES.get(tokens[1], 4)
+                elements[-1][3].append(False)
     counts = {e[0]: e[1] for e in elements}
     body = plain.stat().st_size - body_start
+    polygons = 0
     if fmt == b"ascii":
-        n_lines = sum(1 for line in plain.read_bytes()[body_start:].splitlines() if line.strip())
+        body_lines = [line for line in plain.read_bytes()[body_start:].splitlines() if line.strip()]
         needed = sum(e[1] for e in elements)
-        if n_lines < needed:
+        if len(body_lines) < needed:
             raise InputError(path, f"malformed PLY file: truncated, the header declares {needed} element lines "
-                                   f"but only {n_lines} follow")
+                                   f"but only {len(body_lines)} follow")
+        start = 0
+        for name, count, _, kinds in elements:
+            if name == b"face" and kinds[:1] == [True] and sum(kinds) == 1:
+                polygons = _ply_face_sizes(body_lines[start:start + count], len(kinds) - 1, path)
+            start += count
     else:
         needed = sum(e[1] * e[2] for e in elements)
         if body < needed:
             raise InputError(path, f"malformed PLY file: truncated, the header's elements need at least {needed} "
                                    f"bytes but {body} follow")
-    return FileFacts(counts.get(b"vertex"), counts.get(b"face"), 0)
+    return FileFacts(counts.get(b"vertex"), counts.get(b"face"), polygons)
+
+
+def _ply_face_sizes(face_lines: list[bytes], n_scalars: int, path: Path) -> int:
+    """Number of polygons among ASCII PLY face lines (a vertex list, then ``n_scalars`` values);
+    raises when a line's length disagrees with its list count (the readers would shift every
+    following face) or a face has fewer than 3 vertices."""
+    polygons = 0
+    for i, line in enumerate(face_lines):
+        tokens = line.split()
+        count = _int(tokens[0], path, f"the vertex count of face {i}")
+        if count < 3:
+            raise InputError(path, f"face {i} has {count} vertices; a face needs at least 3")
+        if len(tokens) != 1 + count + n_scalars:
+            raise InputError(path, f"malformed PLY file: face {i} declares {count} vertices but its line holds "
+                                   f"{len(tokens) - 1 - n_scalars} ({line[:60].decode('latin-1')!r})")
+        polygons += count > 3
+    return polygons
 
 
 def check_stl(plain: Path, path: Path) -> FileFacts:
@@ -208,16 +294,26 @@ def check_stl(plain: Path, path: Path) -> FileFacts:
         if size == 84 + 50 * n:
             return FileFacts(None, n, 0)
     data = plain.read_bytes()
-    if data.lstrip()[:5].lower() == b"solid" and b"facet" in data:
-        facets, ends = data.count(b"facet normal"), data.count(b"endfacet")
-        if facets != ends or data.count(b"vertex") != 3 * facets:
+    lower = data.lower()
+    if lower.lstrip()[:5] == b"solid" and b"facet" in lower:
+        facets, ends = len(_STL_FACET.findall(lower)), len(_STL_ENDFACET.findall(lower))
+        vertices = len(_STL_VERTEX.findall(lower))
+        if facets != ends or vertices != 3 * facets:
             raise InputError(path, f"malformed STL file: truncated ASCII STL, {facets} facets begin, {ends} end, "
-                                   f"{data.count(b'vertex')} vertices for them")
+                                   f"{vertices} vertices for them")
         return FileFacts(None, facets, 0)
+    if len(head) == 84 and size > 84 + 50 * n:
+        raise InputError(path, f"malformed STL file: binary STL of {size} bytes where its {n} triangles need "
+                               f"{84 + 50 * n} ({size - 84 - 50 * n} bytes of trailing data)")
     if len(head) == 84:
         raise InputError(path, f"malformed STL file: truncated binary STL, {size} bytes where its {n} triangles "
                                f"need {84 + 50 * n}")
     raise InputError(path, "malformed STL file: neither a binary nor an ASCII STL")
+
+
+_STL_FACET = re.compile(rb"^\s*facet\b", re.MULTILINE)
+_STL_ENDFACET = re.compile(rb"^\s*endfacet\b", re.MULTILINE)
+_STL_VERTEX = re.compile(rb"^\s*vertex\s", re.MULTILINE)
 
 
 CHECKS = {".off": check_off, ".obj": check_obj, ".ply": check_ply, ".stl": check_stl}

@@ -2,9 +2,11 @@
 
 The file's structure is checked first (:mod:`topomatch.stages.mesh.file_checks`: header counts
 against the file, faces of at least three vertices, a decompression cap), then libigl's
-``read_triangle_mesh`` reads it; open3d is the fallback only for the PLY and STL variants libigl
-cannot read, never for a file libigl rejects as malformed (a lenient reader would drop data), and
-its result must match the header's counts. Polygons are triangulated as fans and counted in the
+``read_triangle_mesh`` reads OFF, OBJ and STL; open3d is the fallback only for the STL variants
+libigl cannot read, never for a file libigl rejects as malformed (a lenient reader would drop data),
+and its result must match the header's counts. PLY files are read by MeshLab's reader (pymeshlab):
+libigl's PLY reader aborts the whole process (a C++ double free) on polygons, list counts that do
+not match and unknown property types, which no ``try`` can catch. Polygons are triangulated as fans and counted in the
 result. Gzipped files are decompressed to a temporary file with the inner suffix. Every failure
 becomes an :class:`~topomatch.pipeline.contract.InputError` naming the file and the problem.
 """
@@ -31,9 +33,9 @@ SUPPORTED_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 class LoadParams(Params):
     """Parameters of :func:`load`."""
 
-    reader: Literal["auto", "igl", "open3d"] = Field(
-        "auto", description="mesh reader: libigl, then open3d for PLY and STL files libigl cannot read (auto), "
-                            "or only one")
+    reader: Literal["auto", "igl", "open3d", "pymeshlab"] = Field(
+        "auto", description="mesh reader: MeshLab's for PLY, libigl for the others with open3d for STL files "
+                            "libigl cannot read (auto), or only one")
 
 
 @dataclass(frozen=True, eq=False)
@@ -81,6 +83,17 @@ def _captured_stderr() -> Iterator[list[str]]:
             lines.extend(buf.read().decode("utf-8", "replace").splitlines())
 
 
+def _summarised(messages: list[str], keep: int = 5) -> str:
+    """The distinct messages in order, each with its count when repeated, at most ``keep`` of them."""
+    counts: dict[str, int] = {}
+    for m in messages:
+        if m.strip():
+            counts[m.strip()] = counts.get(m.strip(), 0) + 1
+    parts = [f"{m} (x{n})" if n > 1 else m for m, n in counts.items()]
+    more = f"; and {len(parts) - keep} other messages" if len(parts) > keep else ""
+    return "; ".join(parts[:keep]) + more
+
+
 def _read_igl(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
     import igl
 
@@ -91,9 +104,23 @@ def _read_igl(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
         except RuntimeError:
             ok = False
     if not ok:
-        detail = "; ".join(m.strip() for m in messages if m.strip()) or "libigl could not parse it"
-        raise ValueError(detail)
+        raise ValueError(_summarised(messages) or "libigl could not parse it")
     return V, F, "igl"
+
+
+def _read_pymeshlab(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
+    import pymeshlab
+
+    ms = pymeshlab.MeshSet()
+    with _captured_stderr():
+        try:
+            ms.load_new_mesh(str(plain))
+        except pymeshlab.PyMeshLabException as exc:
+            detail = str(exc).strip().splitlines()
+            raise ValueError(next((d.removeprefix("Error details: ") for d in detail if d.startswith("Error details")),
+                                  "MeshLab could not parse it")) from None
+    m = ms.current_mesh()
+    return np.asarray(m.vertex_matrix(), dtype=np.float64), np.asarray(m.face_matrix(), dtype=np.int64), "pymeshlab"
 
 
 def _read_open3d(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
@@ -109,7 +136,7 @@ def _read_open3d(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
 
 
 #: Formats whose files libigl may not read (binary variants): open3d is tried after libigl for these.
-OPEN3D_FALLBACK = (".ply", ".stl")
+OPEN3D_FALLBACK = (".stl",)
 
 
 def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
@@ -119,8 +146,8 @@ def read_mesh(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, str]:
     ----------
     path : str or Path
         An OFF, OBJ, PLY or STL file, optionally gzipped (``.off.gz``).
-    reader : {'auto', 'igl', 'open3d'}
-        'auto' tries libigl first and, for PLY and STL only, open3d second.
+    reader : {'auto', 'igl', 'open3d', 'pymeshlab'}
+        'auto': pymeshlab for PLY; libigl for the others and, for STL only, open3d second.
 
     Returns
     -------
@@ -144,8 +171,9 @@ def read_mesh_checked(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, 
     """:func:`read_mesh`, with what the structure checks found (counts, polygons)."""
     path = check_readable_file(path)
     fmt = mesh_format(path)
-    readers = {"igl": [_read_igl], "open3d": [_read_open3d],
-               "auto": [_read_igl, _read_open3d] if fmt in OPEN3D_FALLBACK else [_read_igl]}[reader]
+    auto = ([_read_pymeshlab] if fmt == ".ply" else
+            [_read_igl, _read_open3d] if fmt in OPEN3D_FALLBACK else [_read_igl])
+    readers = {"igl": [_read_igl], "open3d": [_read_open3d], "pymeshlab": [_read_pymeshlab], "auto": auto}[reader]
     problems = []
     with plain_file(path, fmt) as plain:
         if plain.stat().st_size == 0:

@@ -204,6 +204,19 @@ def mesh_cases() -> list[Case]:
         ("stl-huge-count", "m.stl", _stl_binary(1_000_000_000, 2), r"m\.stl: "),
         ("stl-truncated", "m.stl", _stl_binary(10, 3), r"m\.stl: "),
         ("stl-ascii-garbage", "m.stl", "solid x\n  facet banana\nendsolid\n", r"m\.stl: "),
+        ("stl-trailing-bytes", "m.stl", _stl_binary(1, 1) + b"\0" * 7, r"m\.stl: .*7 bytes of trailing data"),
+        ("ply-format-blank", "m.ply", _ply_ascii(V, F).replace("format ascii 1.0", "format "),
+         r"m\.ply: .*'format ascii 1\.0'"),
+        ("ply-no-format", "m.ply", _ply_ascii(V, F).replace("format ascii 1.0\n", ""), r"m\.ply: .*no 'format' line"),
+        ("ply-uchar-index-overflow", "m.ply", _ply_ascii(V, [[259, 2, 4]] + F[1:]).replace(
+            "list uchar int", "list uchar uchar"), r"m\.ply: .*(index|259)"),
+        ("ply-polygon-list-mismatch", "m.ply", _ply_ascii(V, F).replace("3 0 2 4\n", "5 0 2 4\n"), r"m\.ply: "),
+        ("off-index-wraps-32-bit", "m.off", _off(V, [[2**32, 2, 4]] + F[1:]), r"m\.off: .*4294967296.*32-bit"),
+        ("obj-index-wraps-32-bit", "m.obj", _obj(V, F[1:] + [[2**32 + 1, 3, 5]]), r"m\.obj: .*4294967297.*32-bit"),
+        ("off-many-bad-lines", "m.off", "OFF\n1200 1 0\n" + "a b c\n" * 1200 + "3 0 1 2\n",
+         r"m\.off: .*bad line.*\(x1200\)"),
+        ("off-gz-ratio-bomb", "m.off.gz", gzip.compress(b"OFF\n6 8 0\n" + b"\0" * (40 << 20), 9),
+         r"m\.off\.gz: .*decompression bomb"),
     ]
     out = []
     for cid, name, content, message in cases:

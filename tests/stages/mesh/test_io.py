@@ -189,3 +189,47 @@ def test_decompressed_size_is_capped(tmp_path, monkeypatch):
     monkeypatch.setenv("TOPOMATCH_MAX_MESH_BYTES", "1000000")
     with pytest.raises(InputError, match="bomb.off.gz: decompresses to more than 1 MiB"):
         read_mesh(path)
+
+
+OCTA = ("OFF\n6 8 0\n1 0 0\n-1 0 0\n0 1 0\n0 -1 0\n0 0 1\n0 0 -1\n"
+        "3 0 2 4\n3 2 1 4\n3 1 3 4\n3 3 0 4\n3 2 0 5\n3 1 2 5\n3 3 1 5\n3 0 3 5\n")
+
+
+def _octa_stl(name: str) -> str:
+    V = [[float(x) for x in line.split()] for line in OCTA.splitlines()[2:8]]
+    F = [[int(x) for x in line.split()[1:]] for line in OCTA.splitlines()[8:]]
+    body = "".join(" facet normal 0 0 0\n  outer loop\n" + "".join("   vertex %g %g %g\n" % tuple(V[i]) for i in f)
+                   + "  endloop\n endfacet\n" for f in F)
+    return f"solid {name}\n{body}endsolid {name}\n"
+
+
+@pytest.mark.parametrize("name,content", [
+    ("comment-before-header.off", "# written by hand\n\n# second comment\n" + OCTA),
+    ("byte-order-mark.off", "\ufeff" + OCTA),
+    ("byte-order-mark.obj", "\ufeff" + "".join(f"v {l}\n" for l in OCTA.splitlines()[2:8])
+     + "".join("f " + " ".join(str(int(i) + 1) for i in l.split()[1:]) + "\n" for l in OCTA.splitlines()[8:])),
+    ("keyword-in-name.stl", _octa_stl("vertex_model")),
+    ("upper-case.stl", _octa_stl("x").upper()),
+])
+def test_format_variants_the_readers_refuse_are_read(tmp_path, name, content):
+    """Variants the formats allow but libigl refuses read as the same octahedron: 6 vertices, 8 faces,
+    a closed surface (Euler characteristic 2)."""
+    path = tmp_path / name
+    path.write_text(content, encoding="utf-8")
+    mesh = read_mesh(path)[0]
+    V = np.unique(np.round(mesh.V, 9), axis=0)
+    assert len(V) == 6 and mesh.n_faces == 8
+    assert np.allclose(np.sort(np.abs(V).sum(axis=1)), 1.0)
+
+
+def test_polygon_ply_is_read_not_aborted(tmp_path):
+    """A PLY with a quad: libigl's reader aborts the process on it; the quad is split in two."""
+    text = ("ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+            "element face 1\nproperty list uchar int vertex_indices\nend_header\n"
+            "0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n")
+    path = tmp_path / "quad.ply"
+    path.write_text(text)
+    mesh = read_mesh(path)[0]
+    import igl
+
+    assert mesh.n_faces == 2 and np.isclose(igl.doublearea(mesh.V, mesh.F).sum() / 2, 1.0)
