@@ -26,11 +26,12 @@ import copy
 import hashlib
 import itertools
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.errors import ConfigError, InputError
 from topomatch.pipeline.params import Params, validate_json_strict
@@ -99,6 +100,10 @@ class InputUnit:
         return next(iter(self.paths.values()))
 
 
+#: Most sweep points a config may ask for (a grid's size is the product of its value counts).
+MAX_SWEEP_POINTS = 10_000
+
+
 class RawConfig(_Strict):
     """The structure of a config file, before stage names and params are resolved."""
 
@@ -120,6 +125,15 @@ class RawConfig(_Strict):
             if not values:
                 raise ValueError(f"sweep {key!r} has no values")
         return value
+
+    @model_validator(mode="after")
+    def _bounded_sweep(self) -> "RawConfig":
+        sizes = [len(v) for v in self.sweep.values()]
+        points = math.prod(sizes) if self.sweep_mode == "grid" else 1 + sum(n - 1 for n in sizes)
+        if points > MAX_SWEEP_POINTS:
+            raise ValueError(f"the sweep has {points:,} points ({' x '.join(map(str, sizes))}), more than the "
+                             f"{MAX_SWEEP_POINTS:,} a run may hold; split it into several configs")
+        return self
 
 
 @dataclass(frozen=True)
@@ -260,6 +274,11 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
     for item in overrides:
         if "=" not in item:
             raise ConfigError(f"--set {item!r}: expected key=value")
+        head = item.split("=", 1)[0].strip().split(".")[0]
+        field, kind = ("sweep", dict) if head == "sweep" else ("stages", list)
+        if (head == "sweep" or head not in RawConfig.model_fields) and not isinstance(data.get(field, kind()), kind):
+            raise ConfigError(f"--set {item!r}: the config's {field!r} is a {type(data[field]).__name__}, "
+                              f"not a {'mapping' if kind is dict else 'list'}")
         key, text = item.split("=", 1)
         try:
             value = load_yaml(text)
@@ -371,30 +390,48 @@ def resolve_inputs_config(inputs: InputsConfig, *, base_dir: Path, data_root: Pa
 
 
 def _pairs_from_csv(spec: PairsCsvConfig, one) -> list[InputUnit]:
+    """One pair per row of the pairs table; every problem of the table is an InputError naming it."""
     import csv
 
     (path,) = one(spec.path, "inputs.pairs_csv.path")[:1]
-    with open(path, newline="", encoding="utf-8") as fh:
-        rows = list(csv.DictReader(fh))
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.DictReader(fh, strict=True))
+    except UnicodeDecodeError as exc:
+        raise InputError(path, f"not a UTF-8 text file (byte {exc.start})") from None
+    except csv.Error as exc:
+        raise InputError(path, f"malformed CSV ({exc})") from None
+    if not rows:
+        raise InputError(path, "the pairs table has no rows")
     units = []
     for r, row in enumerate(rows):
-        where = f"{path}: row {r + 2}"
-        missing = [c for c in [spec.fixed_column, spec.moving_column, *spec.truth_columns.values()] if c not in row]
+        where = f"row {r + 2}"
+        wanted = [spec.fixed_column, spec.moving_column, *spec.truth_columns.values()]
+        missing = [c for c in wanted if c not in row]
         if missing:
-            raise ConfigError(f"{where}: no column {missing[0]!r} (columns: {', '.join(row)})")
+            raise InputError(path, f"{where}: no column {missing[0]!r} (columns: {', '.join(map(str, row))})")
+        short = [c for c in wanted if row[c] is None]
+        if short or None in row:
+            raise InputError(path, f"{where}: {'too few cells' if short else 'too many cells'} for the header "
+                                   f"({len([v for k, v in row.items() if k is not None and v is not None])} "
+                                   f"of {len([k for k in row if k is not None])} columns)")
         cells = {name: row[col].strip() for name, col in spec.truth_columns.items()}
         if any(v == "" for v in cells.values()):
             if spec.skip_missing_truth:
                 continue
-            raise ConfigError(f"{where}: empty truth cell")
+            raise InputError(path, f"{where}: empty truth cell")
         try:
             truth = {name: float(v) for name, v in cells.items()} or None
         except ValueError as exc:
-            raise ConfigError(f"{where}: truth is not a number ({exc})") from None
-        fixed = one(row[spec.fixed_column], f"{where} fixed", path.parent)[0]
-        moving = one(row[spec.moving_column], f"{where} moving", path.parent)[0]
+            raise InputError(path, f"{where}: truth is not a number ({exc})") from None
+        if truth and not all(math.isfinite(v) for v in truth.values()):
+            raise InputError(path, f"{where}: truth is not a finite number ({cells})")
+        fixed = one(row[spec.fixed_column], f"{path}: {where} fixed", path.parent)[0]
+        moving = one(row[spec.moving_column], f"{path}: {where} moving", path.parent)[0]
         units.append(InputUnit(f"{fixed.name}|{moving.name}", {"fixed_path": fixed, "moving_path": moving},
                                {"truth": truth}))
+    if not units:
+        raise InputError(path, "every row lacks its truth (skip_missing_truth): no pairs to register")
     return units
 
 

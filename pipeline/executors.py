@@ -91,24 +91,56 @@ def _single_threaded() -> None:
 
 
 def _local(groups: Sequence[Sequence[Item]], cache_root: str | None, workers: int) -> Iterator[list[ItemResult]]:
+    """Run the groups in a process pool. A worker that dies (killed, out of memory, a crash in
+    native code) breaks the whole pool: the groups it left unfinished run again, each in a pool
+    of its own, so that only the group that kills its worker fails (as an error naming the
+    worker's death), and every other result is kept."""
     workers = min(workers, len(groups))
     if workers <= 1:
         for group in groups:
             yield run_items(group, cache_root)
         return
+    unfinished: list[int] = []
+    yield from _pool_run(groups, range(len(groups)), cache_root, workers, unfinished)
+    for i in unfinished:  # after a worker died: isolate the culprit
+        lost: list[int] = []
+        yield from _pool_run(groups, [i], cache_root, 1, lost)
+        if lost:
+            yield [_worker_died(item) for item in groups[i]]
+
+
+def _pool_run(groups: Sequence[Sequence[Item]], which: Sequence[int], cache_root: str | None, workers: int,
+              unfinished: list[int]) -> Iterator[list[ItemResult]]:
+    """Run ``groups[i]`` for ``i`` in ``which`` in one pool; on a broken pool, append the indices it
+    did not finish to ``unfinished`` and return."""
+    from concurrent.futures.process import BrokenProcessPool
+
     ctx = multiprocessing.get_context("forkserver")
     ctx.set_forkserver_preload(["topomatch.pipeline.item"])
+    done: set[int] = set()
     with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init,
                              initargs=(os.getpid(),)) as pool:
-        with _main_script_hidden([item for group in groups for item in group]):
-            futures = [pool.submit(run_items, group, cache_root) for group in groups]  # starts the workers
+        with _main_script_hidden([item for i in which for item in groups[i]]):
+            futures = {pool.submit(run_items, groups[i], cache_root): i for i in which}  # starts the workers
         try:
             for future in as_completed(futures):
-                yield future.result()
+                try:
+                    result = future.result()
+                except BrokenProcessPool:
+                    unfinished.extend(i for i in which if i not in done)
+                    return
+                done.add(futures[future])
+                yield result
         except BaseException:
             for f in futures:
                 f.cancel()
             raise
+
+
+def _worker_died(item: Item) -> ItemResult:
+    return ItemResult(item.item_id, item.input_path, item.sweep, item.input_label,
+                      error="the worker process computing this item died (killed, out of memory, or a crash in "
+                            "native code); the other items are kept", error_stage="worker")
 
 
 @contextmanager
@@ -145,7 +177,7 @@ def _dask(groups: Sequence[Sequence[Item]], cache_root: str | None,
     if config.address:
         try:
             client = Client(config.address, timeout="10s")
-        except OSError as exc:
+        except (OSError, ValueError, TypeError) as exc:  # unreachable; malformed address (ValueError, TypeError)
             raise ConfigError(f"executor.address: cannot reach the dask scheduler at {config.address!r} ({exc})") from None
     else:
         cluster = LocalCluster(

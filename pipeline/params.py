@@ -74,5 +74,5 @@ def format_validation_error(exc: ValidationError, where: str) -> str:
             msg = "unknown key"
         elif err["type"] != "missing" and err["loc"]:
             msg += f", got {err.get('input')!r}"
-        lines.append(f"{loc}: {msg}")
+        lines.append(f"{loc}: {msg}" if loc else msg)
     return "\n".join(lines)

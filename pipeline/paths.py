@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import glob
 import os
+import re
 from pathlib import Path
 
 from topomatch.pipeline.errors import ConfigError, InputError
@@ -49,10 +50,12 @@ def resolve_input(template: str, *, base_dir: Path, root: Path | None, where: st
             f"{where}: {template!r} needs the external data root; pass --data-root DIR "
             f"or set {DATA_ROOT_ENV} (e.g. to ../shared/data)"
         )
-    try:
-        text = template.format(data_root=str(root) if root else "", bundled=str(BUNDLED_DIR))
-    except (KeyError, IndexError, ValueError) as exc:
-        raise ConfigError(f"{where}: bad path template {template!r}: only {{data_root}} and {{bundled}} are known ({exc})") from None
+    # exact tokens, not str.format: a format spec such as {bundled:>1000000000} would pad to gigabytes
+    text = template.replace("{data_root}", str(root) if root else "").replace("{bundled}", str(BUNDLED_DIR))
+    unknown = re.search(r"\{[^{}/]*\}", text)
+    if unknown:
+        raise ConfigError(f"{where}: bad path template {template[:200]!r}: unknown placeholder "
+                          f"{unknown.group()[:60]!r}; only {{data_root}} and {{bundled}} are known")
     path = Path(text).expanduser()
     if not path.is_absolute():
         path = base_dir / path

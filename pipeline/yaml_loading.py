@@ -10,7 +10,9 @@ hundred bytes can cost minutes and gigabytes:
   anything is built, and a document of more than :data:`MAX_NODES` values is refused;
 - **nesting**: deep ``[[[[...]]]]`` overflows Python's stack; more than :data:`MAX_DEPTH` levels is
   refused, and a stack overflow while parsing is reported as such;
-- **size**: a config of more than :data:`MAX_BYTES` is refused before it is parsed.
+- **size**: a config of more than :data:`MAX_BYTES` is refused before it is parsed;
+- **numbers**: YAML 1.1 reads ``1e-3`` (no dot) as the string ``'1e-3'``; here it is the float
+  0.001, as in YAML 1.2 and JSON.
 """
 
 from __future__ import annotations
@@ -46,6 +48,12 @@ class _StrictLoader(yaml.SafeLoader):
                                   "(the second would silently replace the first)")
             seen[key] = key_node.start_mark.line
         return super().construct_mapping(node, deep=deep)
+
+
+# YAML 1.2's float syntax (exponent without a dot: 1e-3, 2E5), which PyYAML's 1.1 resolver reads as a string
+_StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"))
 
 
 def _check_size(root: yaml.Node) -> None:

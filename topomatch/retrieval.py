@@ -303,6 +303,8 @@ class Collection:
 
     def __init__(self, db: str | Path):
         self.db = Path(db)
+        if self.db.exists() and not self.db.is_file():
+            raise InputError(self.db, "not a regular file (a folder, device or pipe), so not an index")
         if not self.db.exists():
             raise InputError(self.db, "index not found (create it with topomatch index)")
 
@@ -386,19 +388,26 @@ class Collection:
                  out: str | Path | None = None) -> Evaluation:
         """PSB metrics (NN, FT, ST, E, DCG, mAP) of the labelled shapes; the matrix goes to ``out`` (.npz,
         default ``<db>.<method>.npz``)."""
-        from topomatch.stages.retrieval.metrics import retrieval_metrics
+        from topomatch.stages.retrieval.metrics import PSB_CUTOFF, retrieval_metrics
 
         rows, descriptors = self.parts(method)
         keep = [i for i, r in enumerate(rows) if r.label]
         if len(keep) < 2:
             raise ConfigError(f"{self.db}: fewer than two labelled shapes for {method}; index with --labels")
         rows = [rows[i] for i in keep]
+        labels = np.array([r.label for r in rows])
+        path = Path(out) if out else self.db.with_suffix(f".{method}.npz")
+        if not path.parent.is_dir():  # before the matrix is computed, not after
+            raise InputError(path.parent, "not a folder to write the matrix into")
+        sizes = {c: int((labels == c).sum()) for c in set(labels)}
+        if max(sizes.values()) < PSB_CUTOFF + 1:
+            raise InputError(self.db, f"no class has {PSB_CUTOFF + 1} or more labelled shapes (largest: "
+                                      f"{max(sizes.values())}): nothing to evaluate (PSB evaluates a query only when "
+                                      f"its class has at least {PSB_CUTOFF + 1} members)")
         t = time.perf_counter()
         D = self.matrix(method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, options)
         seconds = time.perf_counter() - t
-        labels = np.array([r.label for r in rows])
         metrics = retrieval_metrics(D, labels)
-        path = Path(out) if out else self.db.with_suffix(f".{method}.npz")
         np.savez_compressed(path, D=D, paths=np.array([r.path for r in rows]), labels=labels)
         return Evaluation(method, len(rows), str(path), seconds, metrics)
 

@@ -117,10 +117,10 @@ class ShapeIndex:
 
     def __init__(self, path: str | Path, *, readonly: bool = False):
         self.path = Path(path)
+        if self.path.exists() and not self.path.is_file():
+            raise InputError(self.path, "not a regular file (a folder, device or pipe), so not an index")
         if readonly and not self.path.is_file():
             raise InputError(self.path, "index not found (create it with topomatch index)")
-        if self.path.exists() and not self.path.is_file():
-            raise InputError(self.path, "not a file")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:

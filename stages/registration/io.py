@@ -16,6 +16,7 @@ image of different dimensionality.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +35,27 @@ PILLOW_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
 NIFTI_SUFFIXES = (".nii", ".nii.gz")
 SITK_SUFFIXES = (".dcm", ".dicom", ".ima", ".mha", ".mhd", ".nrrd", ".nhdr")
 SUPPORTED = PILLOW_SUFFIXES + NIFTI_SUFFIXES + SITK_SUFFIXES
+
+
+#: Most pixels (or voxels) an image may hold, checked from the file's header before its pixels are
+#: decoded, so that a small file cannot claim gigabytes; ``$TOPOMATCH_MAX_IMAGE_PIXELS`` overrides it.
+MAX_PIXELS = 100_000_000
+
+
+def max_pixels() -> int:
+    value = os.environ.get("TOPOMATCH_MAX_IMAGE_PIXELS")
+    try:
+        return int(value) if value else MAX_PIXELS
+    except ValueError:
+        return MAX_PIXELS
+
+
+def _check_size(path: Path, shape: tuple[int, ...]) -> None:
+    """Refuse an image whose header declares more than :func:`max_pixels` pixels."""
+    n = int(np.prod([int(s) for s in shape], dtype=np.float64)) if shape else 0
+    if n > max_pixels():
+        raise InputError(path, f"the header declares {' x '.join(str(int(s)) for s in shape)} = {n:,} pixels, "
+                               f"above the limit of {max_pixels():,} (set TOPOMATCH_MAX_IMAGE_PIXELS to raise it)")
 
 
 def image_format(path: str | Path) -> str:
@@ -56,8 +78,10 @@ def _read_pillow(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
     from PIL import Image as PILImage
     from PIL import UnidentifiedImageError
 
+    PILImage.MAX_IMAGE_PIXELS = max_pixels()  # Pillow's own bomb check never fires before ours
     try:
         with PILImage.open(path) as im:
+            _check_size(path, (im.size[1], im.size[0]))
             im.load()
             frames = getattr(im, "n_frames", 1)
             if frames > 1:
@@ -79,6 +103,10 @@ def _read_nifti(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
 
     try:
         img = nib.load(str(path))
+    except Exception as exc:  # nibabel raises many types for a corrupt file
+        raise InputError(path, f"cannot read NIfTI file ({type(exc).__name__}: {exc})") from None
+    _check_size(path, img.shape)
+    try:
         data = np.asarray(img.dataobj)
         zooms = tuple(float(z) for z in img.header.get_zooms())
     except Exception as exc:  # nibabel raises many types for a corrupt file
@@ -95,7 +123,12 @@ def _read_sitk(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
     import SimpleITK as sitk
 
     try:
-        img = sitk.ReadImage(str(path))
+        reader = sitk.ImageFileReader()
+        reader.SetFileName(str(path))
+        reader.ReadImageInformation()
+        _check_size(path, tuple(reader.GetSize()) + ((reader.GetNumberOfComponents(),)
+                                                     if reader.GetNumberOfComponents() > 1 else ()))
+        img = reader.Execute()
     except RuntimeError as exc:
         detail = str(exc).strip().splitlines()[-1] if str(exc).strip() else "SimpleITK could not read it"
         raise InputError(path, f"cannot read image ({detail})") from None

@@ -32,7 +32,7 @@ class MisalignParams(Params):
     theta: tuple[float, float, float] = Field((0.0, 0.0, 0.0), description="(tx, ty, angle): pixels, degrees "
                                                                            "(ITK convention); unused when `index` is set")
     index: int | None = Field(None, ge=0, description="draw case `index` of a random sweep instead of `theta`")
-    seed: int = Field(0, description="seed of the random cases")
+    seed: int = Field(0, ge=0, description="seed of the random cases")
     max_translation: float = Field(20.0, ge=0, allow_inf_nan=False, description="random |tx|, |ty| bound (pixels)")
     max_angle: float = Field(25.0, ge=0, le=180, allow_inf_nan=False, description="random |angle| bound (degrees)")
     order: Literal[1, 3] = Field(3, description="resampling: 1 bilinear, 3 cubic B-spline")

@@ -129,6 +129,11 @@ class CheckSpec(Params):
     min_prominence: float = Field(6.0, ge=0, allow_inf_nan=False,
                                   description="flag a result less than this many median absolute deviations "
                                               "above the coarse search's median (0: off)")
+    min_flatness: float = Field(0.25, ge=0, le=1, allow_inf_nan=False,
+                                description="flag a result from which the coarse search's measure falls, in its "
+                                            "flattest direction, less than this fraction of its fall in the "
+                                            "steepest (6 search pixels away): a parameter the images do not "
+                                            "determine (0: off)")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
     refine: int = Field(20, ge=0, description="first-level iterations from the best probe before it is compared "
@@ -150,7 +155,7 @@ class RegisterParams(Params):
     bounds: BoundsSpec = Field(default_factory=BoundsSpec, description="search box: max_translation, max_angle")
     check: CheckSpec = Field(default_factory=CheckSpec, description="self-check: capture, probes, margin, "
                                                                    "candidates, refine, retry, on_failure")
-    seed: int = Field(0, description="seed of the SPSA perturbations and of the sample subsets")
+    seed: int = Field(0, ge=0, description="seed of the SPSA perturbations and of the sample subsets")
 
     def method(self) -> str:
         """A short label such as ``spsa/jt(alpha=2 histogram)``."""

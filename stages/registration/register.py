@@ -48,7 +48,7 @@ from topomatch.pipeline.contract import StageError, StageResult, stage
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.objective import Level, Objective, build_pyramid, intensity_centroid, rms_radius
 from topomatch.stages.registration.params import LevelSpec, RegisterParams  # noqa: F401 (LevelSpec: the API)
-from topomatch.stages.registration.search import GridSearch, SearchImages, grid_search
+from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search
 from topomatch.stages.registration.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.spsa import OptimizeResult, SPSASettings, spsa_maximize
 from topomatch.stages.registration.transform import RigidTransform, rotation_matrix
@@ -309,6 +309,22 @@ class _Run:
                 chosen.append(probe)
         return chosen
 
+    def flatness_check(self, theta: np.ndarray) -> list[str]:
+        """Is some combination of the parameters undetermined? (:func:`~topomatch.stages.registration.search.flatness`
+        on the coarse search's measure, 2 and 6 search pixels from the result.)"""
+        if self.params.check.min_flatness <= 0:
+            return []
+        f = self.search_images.factor
+        ratio, u = flatness(lambda t: self.search_images.score(t, min_overlap=0.0), theta, step=2.0 * f,
+                            reach=6.0 * f, radius=self.radius)
+        if ratio >= self.params.check.min_flatness:
+            return []
+        u = u * np.sign(u[np.abs(u).argmax()])
+        return [f"the measure hardly changes along ({u[0]:+.2f} tx, {u[1]:+.2f} ty, "
+                f"{math.degrees(u[2] / self.radius):+.2f} deg) per pixel from the result (it falls {ratio:.0%} as "
+                f"much as in the steepest direction; min_flatness {self.params.check.min_flatness:.0%}): the images "
+                f"do not determine that combination of the parameters (a straight edge, stripes, a disc?)"]
+
     def self_check(self, theta: np.ndarray, value: float,
                    stop: str) -> tuple[list[str], tuple[np.ndarray, str] | None]:
         """Reasons to distrust a result (empty list: none), and a better result found by the capture
@@ -316,7 +332,7 @@ class _Run:
 
         Checks, in order: the optimiser started; the overlap; the search bounds; and with
         ``check.capture`` the coarse search (:mod:`~topomatch.stages.registration.search`): the
-        content overlap, the prominence, and the ``check.candidates`` best grid transforms away from
+        content overlap, the prominence, the flatness (:meth:`flatness_check`), and the ``check.candidates`` best grid transforms away from
         the result, each refined (:meth:`refine`) and, if one beats the result at the first level,
         run through the whole schedule to confirm it at full resolution.
         """
@@ -353,6 +369,7 @@ class _Run:
                 problems.append(f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
                                 f"deviations above a typical transform of a coarse search (min_prominence "
                                 f"{check.min_prominence:g}); the images may share too little content to register")
+            problems += self.flatness_check(theta)
             best_value, best_theta = -math.inf, None
             for probe in self.candidates(grid, theta):
                 v = levels[0].objective(probe)

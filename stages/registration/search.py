@@ -38,6 +38,14 @@ SEARCH_SIDE = 24
 """Target smaller side (pixels) of the search copy of the images."""
 SEARCH_BINS = 16
 
+# the 13 directions of (tx, ty, arc) space, one of each opposite pair: axes, face and body diagonals
+_DIRECTIONS = np.array([d for d in np.array(np.meshgrid([-1, 0, 1], [-1, 0, 1], [-1, 0, 1])).reshape(3, -1).T
+                        if tuple(d) > (0, 0, 0)], dtype=np.float64)
+_DIRECTIONS /= np.linalg.norm(_DIRECTIONS, axis=1)[:, None]
+# translations every 10 degrees and the pure rotation
+_PLANAR = np.vstack([np.column_stack([np.cos(np.radians(np.arange(0, 180, 10))),
+                                      np.sin(np.radians(np.arange(0, 180, 10))), np.zeros(18)]), [[0.0, 0.0, 1.0]]])
+
 
 def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
     """Otsu's threshold (Otsu 1979: maximal between-class variance) of the values, on ``bins`` bins.
@@ -200,6 +208,56 @@ class GridSearch:
         if mad <= 0:
             return math.inf if value > median else 0.0
         return (value - median) / mad
+
+
+def flatness(score: Callable[[np.ndarray], float], theta: np.ndarray, *, step: float, reach: float,
+             radius: float) -> tuple[float, np.ndarray]:
+    """How little ``score`` falls from its maximum ``theta`` in its flattest direction, relative to
+    its steepest: near 0 when the images do not determine some combination of the parameters
+    (translation along a straight edge or stripes, the rotation of a disc).
+
+    Directions are unit vectors of ``(tx, ty, arc)`` space, the angle as the arc at ``radius``
+    pixels (the RMS radius of the fixed image). A quadratic form fitted to the drops
+    ``score(theta) - mean(score(theta +- step u))`` over 13 directions (axes, face and body
+    diagonals) gives the locally flattest direction (its eigenvector of least curvature); then the
+    drop at the longer ``reach`` is measured along it, along translations every 10 degrees and the
+    pure rotation, and along the 13. Close to the optimum a cusp and the sampling noise blur the
+    curvature; at ``reach`` a determined optimum has fallen in every direction, an undetermined
+    one has not in its flat direction.
+
+    Returns
+    -------
+    ratio : float
+        The smallest drop at ``reach`` over the largest (clipped to [0, 1]).
+    direction : ndarray, shape (3,)
+        The flattest direction ``(tx, ty, arc)``.
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    here = score(theta)
+    if not math.isfinite(here):
+        return 0.0, _DIRECTIONS[0]
+
+    def drop(u: np.ndarray, r: float) -> float:
+        delta = r * np.array([u[0], u[1], math.degrees(u[2] / radius)])
+        around = [score(theta + sign * delta) for sign in (1.0, -1.0)]
+        return here - 0.5 * sum(around) if all(map(math.isfinite, around)) else math.nan
+
+    local = np.array([drop(u, step) for u in _DIRECTIONS])
+    known = np.isfinite(local)
+    candidates = [_DIRECTIONS, _PLANAR]
+    if known.sum() >= 6:
+        u = _DIRECTIONS[known]
+        design = np.column_stack([u[:, 0] ** 2, u[:, 1] ** 2, u[:, 2] ** 2,
+                                  2 * u[:, 0] * u[:, 1], 2 * u[:, 0] * u[:, 2], 2 * u[:, 1] * u[:, 2]])
+        a = np.linalg.lstsq(design, local[known], rcond=None)[0]
+        _, vectors = np.linalg.eigh(np.array([[a[0], a[3], a[4]], [a[3], a[1], a[5]], [a[4], a[5], a[2]]]))
+        candidates.append(vectors[:, :1].T)
+    directions = np.vstack(candidates)
+    far = np.array([drop(u, reach) for u in directions])
+    if not np.isfinite(far).any() or np.nanmax(far) <= 0:
+        return 0.0, directions[0]
+    flattest = int(np.nanargmin(far))
+    return float(np.clip(far[flattest] / np.nanmax(far), 0.0, 1.0)), directions[flattest]
 
 
 def grid_search(images: SearchImages, translation_at: Callable[[float], np.ndarray], *, angles: int, steps: int,

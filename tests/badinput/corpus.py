@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import os
 import sqlite3
 import struct
 import zlib
@@ -87,6 +88,17 @@ def _png(width: int, height: int, pixels: bytes | None = None, *, declared: tupl
 
     return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 8, 0, 0, 0, 0))
             + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def _png_1bit(width: int, height: int) -> bytes:
+    """A 1-bit PNG of ``width`` x ``height`` zero pixels: a few kilobytes that decode to a huge array."""
+    row = b"\0" + b"\0" * ((width + 7) // 8)
+
+    def chunk(tag: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
+
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 1, 0, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(row * height, 9)) + chunk(b"IEND", b""))
 
 
 def _nifti(data: np.ndarray) -> Callable[[Path], None]:
@@ -258,6 +270,27 @@ def _with(**changes) -> str:
     return _yaml(cfg)
 
 
+_PAIRS_CONFIG = _yaml({"name": "pairs", "inputs": {"pairs_csv": {"path": "{d}/p.csv", "truth_columns": {"tx": "tx"},
+                                                                  "skip_missing_truth": False}},
+                        "stages": ["load_pair"]})
+
+
+def _pairs_tables() -> list[tuple[str, str | bytes, str]]:
+    """Damaged pair tables: (case id, content, expected message)."""
+    png = str(ITK / "BrainProtonDensitySlice.png")
+    row = f"{png},{png},1.5\n"
+    return [
+        ("empty", "fixed,moving,tx\n", "the pairs table has no rows"),
+        ("short-row", "fixed,moving,tx\n" + row + f"{png}\n", "row 3: too few cells"),
+        ("long-row", "fixed,moving,tx\n" + f"{png},{png},1,2\n", "row 2: too many cells"),
+        ("unclosed-quote", "fixed,moving,tx\n" + f'"{png},{png},1\n', "(malformed CSV|too few cells)"),
+        ("latin1", ("fixed,moving,tx\n" + row).encode() + "caf\xe9\n".encode("latin-1"), "not a UTF-8 text file"),
+        ("nan-truth", "fixed,moving,tx\n" + f"{png},{png},nan\n", "row 2: truth is not a finite number"),
+        ("text-truth", "fixed,moving,tx\n" + f"{png},{png},ten\n", "row 2: truth is not a number"),
+        ("missing-column", "fixed,moving\n" + f"{png},{png}\n", "row 2: no column 'tx'"),
+    ]
+
+
 def config_cases() -> list[Case]:
     laughs = "a: &a [x,x,x,x,x,x,x,x,x,x]\n" + "".join(
         f"{chr(98 + i)}: &{chr(98 + i)} [{','.join(['*' + chr(97 + i)] * 10)}]\n" for i in range(8))
@@ -298,6 +331,9 @@ def config_cases() -> list[Case]:
         ("name-not-string", _with(name=["a"]), 2, r"name"),
         ("executor-unknown", _with(executor={"kind": "quantum"}), 2, r"quantum"),
         ("data-root-unset", _with(inputs={"meshes": ["{data_root}/x.off"]}), 2, r"data.root|TOPOMATCH_DATA_ROOT"),
+        ("sweep-too-large", _with(sweep={"noise.sigma": list(range(30)), "noise.seed": list(range(30)),
+                                         "clean.merge_tolerance": [0.0] * 30}, stages=["load", "clean", "noise"]),
+         2, r"the sweep has 27,000 points"),
     ]
     out = []
     for cid, text, code, message in cases:
@@ -325,6 +361,19 @@ def config_cases() -> list[Case]:
         Case("config-bad-mesh-item", "config", ["run", "{d}/c.yaml", "--out", "{d}/out", "--no-progress"], 1,
              r"1 of 2 items failed", {"c.yaml": _with(inputs={"meshes": ["{d}/ok.off", "{d}/bad.off"]}),
                                       "ok.off": OCTAHEDRON, "bad.off": "OFF\n3 1 0\n"}),
+        Case("config-template-format-spec", "config", ["run", "{d}/c.yaml", "--out", "{d}/out", "--no-progress"], 2,
+             r"unknown placeholder '\{bundled:>1000000000\}'",
+             {"c.yaml": _with(inputs={"meshes": ["{bundled:>1000000000}/x.off"]})}),
+        Case("config-dask-bad-address", "config", ["run", "{d}/c.yaml", "--out", "{d}/out", "--no-progress"], 2,
+             r"executor\.address: cannot reach the dask scheduler .*unknown address scheme",
+             {"c.yaml": _with(executor={"kind": "dask", "address": "zzz://bad address"}), "ok.off": OCTAHEDRON}),
+        Case("config-set-on-malformed-sweep", "config", ["run", "{d}/c.yaml", "--set", "sweep.noise.sigma=[1]"], 2,
+             r"'sweep' is a list, not a mapping", {"c.yaml": base + "sweep: [1, 2]\n"}),
+        Case("config-set-on-malformed-stages", "config", ["run", "{d}/c.yaml", "--set", "noise.sigma=1"], 2,
+             r"'stages' is a str, not a list", {"c.yaml": base.replace("stages:", "old_stages:") + "stages: load\n"}),
+        *[Case(f"config-pairs-csv-{cid}", "config", ["run", "{d}/c.yaml", "--out", "{d}/out", "--no-progress"], 1,
+               rf"p\.csv: {message}", {"c.yaml": _PAIRS_CONFIG, "p.csv": table})
+          for cid, table, message in _pairs_tables()],
         Case("config-data-root-missing", "config", ["run", "{d}/c.yaml", "--data-root", "{d}/nowhere"], 1,
              r"nowhere", {"c.yaml": _with(inputs={"meshes": ["{data_root}/x.off"]}), "ok.off": OCTAHEDRON}),
     ]
@@ -363,6 +412,11 @@ def image_cases() -> list[Case]:
         ("nii-garbage", {"m.nii": b"\0" * 400}, ["{d}/m.nii"], r"m\.nii: "),
         ("unsupported", {"m.xyz": b"abc"}, ["{d}/m.xyz"], r"m\.xyz: "),
         ("directory", {"sub/x.txt": "x"}, ["{d}/sub"], r"sub: not a regular file"),
+        ("png-1bit-bomb", {"m.png": _png_1bit(11000, 11000)}, ["{d}/m.png"],
+         r"m\.png: the header declares 11000 x 11000 .*TOPOMATCH_MAX_IMAGE_PIXELS"),
+        ("metaimage-dev-zero", {"m.mhd": "ObjectType = Image\nNDims = 2\nDimSize = 20000 20000\n"
+                                         "ElementType = MET_UCHAR\nElementDataFile = /dev/zero\n"}, ["{d}/m.mhd"],
+         r"m\.mhd: the header declares 20000 x 20000"),
         ("noise-flagged", {"m.png": noise}, ["{d}/m.png"], r"registration flagged"),
         ("shifted-out-of-view", {"m.png": _shifted_pd(150, 45)}, ["{d}/m.png"], r"registration flagged: .*content"),
     ]
@@ -424,6 +478,8 @@ def cli_cases() -> list[Case]:
         ("workers-text", ["index", torus, "--db", "{d}/x.db", "--workers", "all"], 2, r"workers"),
         ("executor-unknown", ["index", torus, "--db", "{d}/x.db", "--executor", "gpu"], 2, r"gpu"),
         ("index-no-db", ["index", torus], 2, r"--db"),
+        ("out-empty", ["skeleton", torus, "--out", ""], 2, r"--out: an empty path"),
+        ("db-empty", ["query", torus, "--db", ""], 2, r"--db: an empty path"),
         ("run-no-config", ["run"], 2, r"config"),
         ("skeleton-out-is-file", ["skeleton", torus, "--out", "{d}/f.txt"], 1,
          r"f\.txt: .*(file is in the way|Not a directory|exists)"),
@@ -457,6 +513,14 @@ def database_cases() -> list[Case]:
          {"x.db": lambda p: _sqlite(p, ["CREATE TABLE t(a)"])}, (), r"x\.db: .*not a topomatch index"),
         ("index-labels-missing", ["index", torus, "--db", "{d}/x.db", "--labels", "{d}/none.csv"], {}, (),
          r"none\.csv: "),
+        ("query-device", ["query", torus, "--db", "/dev/zero"], {}, (), r"/dev/zero: not a regular file"),
+        ("index-fifo", ["index", torus, "--db", "{d}/fifo", "--method", "d2"], {"fifo": lambda p: os.mkfifo(p)}, (),
+         r"fifo: not a regular file"),
+        ("evaluate-no-class-of-3", ["evaluate", "--db", "{db}", "--method", "d2"], {}, ("db",),
+         r"shared\.db: no class has 3 or more labelled shapes \(largest: 2\)"),
+        ("index-labels-conflicting", ["index", torus, "--db", "{d}/x.db", "--labels", "{d}/l.csv", "--method", "d2"],
+         {"l.csv": "relative_path,class\ntorus.off,ring\nother.off,x\ntorus.off,donut\n"}, (),
+         r"l\.csv: 'torus\.off' has class 'ring' on row 2 and 'donut' on row 4"),
         ("index-labels-malformed", ["index", torus, "--db", "{d}/x.db", "--labels", "{d}/l.csv", "--method", "d2"],
          {"l.csv": "\0\0binary\n"}, (), r"l\.csv: "),
     ]

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import signal
 import sys
 
 import numpy as np
@@ -96,6 +98,14 @@ def _interrupting_stage(mesh, *, params):
     return _BoomResult(mesh.name)
 
 
+@stage("test_sigkill", params=_BoomParams, version=1, consumes=("mesh",), produces=())
+def _killing_stage(mesh, *, params):
+    """Test stage: the worker process dies (SIGKILL, as an out-of-memory kill) on one mesh."""
+    if mesh.name == params.fail_on:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _BoomResult(mesh.name)
+
+
 register_module(sys.modules[__name__])
 
 
@@ -125,6 +135,19 @@ def test_failed_item_does_not_stop_the_others(small_config, tmp_path):
     assert "broken.off" in outcome.items[0].error and "malformed OFF" in outcome.items[0].error
     rows = json.loads((outcome.run_dir / "tables" / "results.json").read_text())
     assert [row["status"] for row in rows] == ["failed", "ok", "ok"]
+
+
+def test_a_dying_worker_fails_only_its_item(small_config, tmp_path):
+    """A worker killed mid-item breaks the process pool; the command neither crashes nor loses the
+    other items: they run again in pools of their own and only the killing item fails."""
+    small_config["sweep"] = {}
+    small_config["stages"] = ["load", {"test_sigkill": {"fail_on": "eight_genus2"}}]
+    small_config["executor"] = {"kind": "local", "workers": 2}
+    outcome = _run(small_config, tmp_path, use_cache=False)
+    status = {r.item_id: r.ok for r in outcome.items}
+    assert status == {"torus.off": True, "eight_genus2.off": False}
+    failed = next(r for r in outcome.items if not r.ok)
+    assert "worker process computing this item died" in failed.error
 
 
 def _finals(outcome):

@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
-from topomatch.cli.common import command
+from topomatch.cli.common import command, path_argument, to_json
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.paths import DATA_ROOT_ENV
 
@@ -17,7 +16,7 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a config value: stage.param=value (noise.sigma=0.01) or a config key "
                         "(executor.kind=dask); repeatable")
-    p.add_argument("--data-root", metavar="DIR", help=f"external data root for {{data_root}} paths "
+    p.add_argument("--data-root", type=path_argument, metavar="DIR", help=f"external data root for {{data_root}} paths "
                                                        f"(default: ${DATA_ROOT_ENV})")
 
 
@@ -37,8 +36,8 @@ def add_parsers(sub) -> None:
 
 def _run_arguments(p: argparse.ArgumentParser) -> None:
     _add_config_args(p)
-    p.add_argument("--out", metavar="DIR", default="runs", help="parent folder of run folders (default: runs)")
-    p.add_argument("--cache-dir", metavar="DIR", help="stage cache (default: OUT/.cache)")
+    p.add_argument("--out", type=path_argument, metavar="DIR", default="runs", help="parent folder of run folders (default: runs)")
+    p.add_argument("--cache-dir", type=path_argument, metavar="DIR", help="stage cache (default: OUT/.cache)")
     p.add_argument("--no-cache", action="store_true", help="recompute everything, store nothing")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
@@ -94,7 +93,7 @@ def cmd_stages(args: argparse.Namespace) -> int:
         "reports": {name: {"doc": r.doc, "params": params(r)} for name, r in sorted(REPORTS.items())},
     }
     if args.json:
-        print(json.dumps(listing, indent=2, default=str))
+        print(to_json(listing, indent=2, default=str))
         return 0
     for kind in ("stages", "reports"):
         print(f"{kind.upper()}")

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import argparse
 
-from topomatch.cli.common import command, print_result
+from topomatch.cli.common import command, path_argument, print_result
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 from topomatch.pipeline.errors import TopomatchError
 
@@ -48,7 +48,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("fixed", help="fixed (reference) image: PNG, TIFF, NIfTI, DICOM, MetaImage")
     p.add_argument("moving", help="moving (target) image")
     add_options(p, _models(), _options())
-    p.add_argument("--out", metavar="DIR", help="write moving_resampled.png/.tif, overlay.png and registration.json")
+    p.add_argument("--out", type=path_argument, metavar="DIR", help="write moving_resampled.png/.tif, overlay.png and registration.json")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 

@@ -9,10 +9,9 @@ commands on a collection, the best single method for ``match``. The matching opt
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
-from topomatch.cli.common import command
+from topomatch.cli.common import command, path_argument, to_json
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 
@@ -92,9 +91,9 @@ def _index_arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
 
     p.add_argument("paths", nargs="+", help="mesh files or folders (searched recursively)")
-    p.add_argument("--db", required=True, help="index file (SQLite), created if missing")
+    p.add_argument("--db", type=path_argument, required=True, help="index file (SQLite), created if missing")
     _method_arg(p, DEFAULT_METHOD)
-    p.add_argument("--labels", help="CSV with columns relative_path (or path) and class (or label), paths "
+    p.add_argument("--labels", type=path_argument, help="CSV with columns relative_path (or path) and class (or label), paths "
                                     "relative to the CSV's folder")
     add_options(p, _models(), EXECUTOR_OPTIONS)
     p.add_argument("--retry-failed", action="store_true", help="recompute meshes recorded as failed")
@@ -105,7 +104,7 @@ def _query_arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
 
     p.add_argument("mesh", help="query mesh")
-    p.add_argument("--db", required=True, help="index file")
+    p.add_argument("--db", type=path_argument, required=True, help="index file")
     p.add_argument("-k", type=positive_int, default=10, help="results to show (default 10)")
     _method_arg(p, DEFAULT_METHOD)
     _with_match_options(p)
@@ -115,10 +114,10 @@ def _query_arguments(p: argparse.ArgumentParser) -> None:
 def _evaluate_arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
 
-    p.add_argument("--db", required=True, help="index file")
+    p.add_argument("--db", type=path_argument, required=True, help="index file")
     _method_arg(p, DEFAULT_METHOD)
     _with_match_options(p)
-    p.add_argument("--out", help="where to write the matrix (.npz; default next to the index)")
+    p.add_argument("--out", type=path_argument, help="where to write the matrix (.npz; default next to the index)")
     p.add_argument("--json", action="store_true", help="print JSON")
 
 
@@ -128,7 +127,7 @@ def cmd_match(args: argparse.Namespace) -> int:
     result = match(args.a, args.b, method=args.method, options=_given(args))
     out = result.to_dict()
     if args.json:
-        print(json.dumps(out))
+        print(to_json(out))
     else:
         print(f"dissimilarity ({args.method}): {result.dissimilarity:.6g}")
         if result.correspondence is not None:
@@ -165,7 +164,7 @@ def cmd_query(args: argparse.Namespace) -> int:
 
     result = open_index(args.db).query(args.mesh, k=args.k, method=args.method, options=_given(args))
     if args.json:
-        print(json.dumps(result.to_dict()))
+        print(to_json(result.to_dict()))
     else:
         endpoints = result.endpoints if result.endpoints is not None else "-"
         print(f"query {args.mesh} ({args.method}, {endpoints} endpoints) against {result.indexed} shapes:")
@@ -179,7 +178,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     ev = open_index(args.db).evaluate(method=args.method, options=_given(args), out=args.out)
     if args.json:
-        print(json.dumps(ev.to_dict()))
+        print(to_json(ev.to_dict()))
     else:
         print(ev.metrics.table(args.method))
         print(f"{ev.n} shapes; matrix ({ev.matrix_seconds:.2f} s) written to {ev.matrix}")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from topomatch.cli.common import command, print_result
+from topomatch.cli.common import command, path_argument, print_result
 from topomatch.pipeline.cli_options import add_options, given_options
 
 
@@ -36,7 +36,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL, optionally .gz)")
     add_options(p, _models(), SKELETON_OPTIONS)
-    p.add_argument("--out", metavar="DIR", help="write skeleton.graphml/.json/.obj, reeb.graphml and skeleton.png")
+    p.add_argument("--out", type=path_argument, metavar="DIR", help="write skeleton.graphml/.json/.obj, reeb.graphml and skeleton.png")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 

@@ -112,3 +112,28 @@ def test_noise_is_not_registered(pd_slice):
     reg = register(pd_slice, noise)
     assert not reg.ok
     assert "not a distinct optimum" in reg.reason
+
+
+def test_flatness_of_a_quadratic_is_its_eigenvalue_ratio():
+    """On an exact quadratic ``-(t' A t)`` the flattest direction is A's least eigenvector and the
+    ratio its eigenvalue over the largest (the arc unit: 1 px at radius r)."""
+    from topomatch.stages.registration.search import flatness
+
+    radius = 50.0
+    Q = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
+    A = Q @ np.diag([0.1, 1.0, 2.0]) @ Q.T
+    to_unit = np.array([1.0, 1.0, radius * np.pi / 180.0])  # (tx, ty, deg) -> (tx, ty, arc)
+    ratio, u = flatness(lambda t: -float((t * to_unit) @ A @ (t * to_unit)), np.zeros(3), step=1.0, reach=3.0,
+                        radius=radius)
+    assert ratio == pytest.approx(0.05, abs=0.01)
+    assert abs(u @ Q[:, 0]) > 0.99
+
+
+def test_an_edge_is_flagged_as_undetermined_not_ok(pd_slice):
+    """A straight edge moved along and across itself: translation along it is not determined, and
+    the self-check says so instead of returning an arbitrary point of the valley."""
+    H, W = pd_slice.shape
+    yy, xx = np.mgrid[0:H, 0:W].astype(float)
+    edge = pd_slice.with_data(200.0 * (xx + yy < H) + np.random.default_rng(1).normal(0, 3, (H, W)), name="edge")
+    reg = register(edge, moved(edge, RigidTransform.for_image(edge.shape, 5.0, 7.0, 0.0)))
+    assert not reg.ok and "hardly changes along" in reg.reason
