@@ -72,6 +72,8 @@ def main() -> None:
                          "seconds": m["seconds"], "peak_mb": m["peak_mb"]})
             print(f"{case.id:45s} {m['code']} {'ok ' if ok else 'BAD'} {m['seconds']:6.2f} s {m['peak_mb']:7.1f} MB",
                   flush=True)
+            if not ok:
+                print("    " + m["output"][-1500:].replace("\n", "\n    "), flush=True)
     slowest = max(rows, key=lambda r: r["seconds"])
     biggest = max(rows, key=lambda r: r["peak_mb"])
     summary = {"cases": len(rows), "as_expected": sum(r["as_expected"] for r in rows),

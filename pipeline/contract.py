@@ -18,13 +18,13 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from topomatch.pipeline.errors import ConfigError, InputError, StageError, TopomatchError
-from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text, check_readable_file
+from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text, check_readable_file, limit_from_env
 from topomatch.pipeline.params import Params
 
 __all__ = [
     "ConfigError", "InputError", "StageError", "TopomatchError", "Params", "StageResult", "StageSpec", "stage",
     "ReportOutput", "ReportSpec", "report", "gallery_layout", "atomic_write_bytes", "atomic_write_text",
-    "check_readable_file",
+    "check_readable_file", "limit_from_env",
 ]
 
 

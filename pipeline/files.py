@@ -64,3 +64,13 @@ def check_readable_file(path: str | Path) -> Path:
     if not os.access(path, os.R_OK):
         raise InputError(path, "file is not readable (permission denied)")
     return path
+
+
+def limit_from_env(name: str, default: int) -> int:
+    """A size limit: the integer in the environment variable ``name``, else ``default`` (also when
+    the variable is empty or not a whole number)."""
+    value = os.environ.get(name)
+    try:
+        return int(value) if value else default
+    except ValueError:
+        return default

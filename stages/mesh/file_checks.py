@@ -22,25 +22,20 @@ from __future__ import annotations
 
 import contextlib
 import gzip
-import os
 import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from topomatch.pipeline.contract import InputError
+from topomatch.pipeline.contract import InputError, limit_from_env
 
 #: Largest decompressed mesh file (bytes); ``$TOPOMATCH_MAX_MESH_BYTES`` overrides it.
 MAX_BYTES = 512 * 2**20
 
 
 def max_bytes() -> int:
-    value = os.environ.get("TOPOMATCH_MAX_MESH_BYTES")
-    try:
-        return int(value) if value else MAX_BYTES
-    except ValueError:
-        return MAX_BYTES
+    return limit_from_env("TOPOMATCH_MAX_MESH_BYTES", MAX_BYTES)
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,6 @@ image of different dimensionality.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,6 +26,7 @@ from topomatch.pipeline.contract import (
     Params,
     StageResult,
     check_readable_file,
+    limit_from_env,
     stage,
 )
 from topomatch.stages.registration.image import Image
@@ -43,11 +43,7 @@ MAX_PIXELS = 100_000_000
 
 
 def max_pixels() -> int:
-    value = os.environ.get("TOPOMATCH_MAX_IMAGE_PIXELS")
-    try:
-        return int(value) if value else MAX_PIXELS
-    except ValueError:
-        return MAX_PIXELS
+    return limit_from_env("TOPOMATCH_MAX_IMAGE_PIXELS", MAX_PIXELS)
 
 
 def _check_size(path: Path, shape: tuple[int, ...]) -> None:
