@@ -1,0 +1,141 @@
+"""Stress collections for retrieval (issue 10): articulated classes in new poses, some meshes open.
+
+Usage::
+
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_collections.py OUT_DIR
+
+Builds, from the shared classic meshes, three labelled collections (OFF files + ``labels.csv``):
+
+* ``strong_tune`` (seed 1, 30 % open): 9 source shapes (human, ant, octopus, teddy, four-legged
+  animal, cat, koala, camel, scorpion) -- the split where fusion settings may be chosen;
+* ``strong_report`` (seed 2, closed) and ``strong_report_open`` (seed 3, 60 % open): 9 other
+  sources (two humans, horse, cow, armadillo, hand, pliers, stuffed toy, glasses) -- reported only.
+
+Each source gives a class of 3 to 20 near-isometric pose variants: ARAP (libigl ``arap``) with
+the core patch fixed and 4-6 extremity patches rotated by up to 110 degrees about the point halfway
+to the centroid; "open" variants lose the faces within 3 % of the diagonal of 1-3 random vertices
+(boundaries appear). Sources over 20,000 vertices are decimated first (fast-simplification).
+Index each folder with ``topomatch index DIR --db DIR.db --labels DIR/labels.csv`` and evaluate
+every method with ``topomatch evaluate --db DIR.db --method M``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import igl
+import numpy as np
+
+import topomatch
+from topomatch.pipeline.paths import data_root
+
+TUNE = ["human_watertight1.off", "ant_watertight81.off", "octopus_watertight121.off", "teddy_watertight161.off",
+        "fourleg_watertight381.off", "odedstein_cat-low-resolution.obj", "odedstein_koala_low_resolution.obj",
+        "camel_isoblend.obj", "odedstein_scorpion_low_resolution.obj"]
+REPORT = ["odedstein_human_man.obj", "odedstein_human_woman.obj", "horse_cyberware.ply",
+          "odedstein_cow-low-resolution.obj", "odedstein_armadillo.obj", "hand_watertight181.off",
+          "plier_watertight201.off", "odedstein_stuffedtoy.obj", "glasses_watertight41.off"]
+
+
+def extremities(V: np.ndarray, k: int) -> list[int]:
+    """``k`` extremity vertices: farthest-point sampling started from the vertex farthest from the centroid."""
+    chosen = [int(np.argmax(np.linalg.norm(V - V.mean(axis=0), axis=1)))]
+    d = np.linalg.norm(V - V[chosen[0]], axis=1)
+    for _ in range(k - 1):
+        i = int(np.argmax(d))
+        chosen.append(i)
+        d = np.minimum(d, np.linalg.norm(V - V[i], axis=1))
+    return chosen
+
+
+def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """Rodrigues' rotation matrix (3, 3) about ``axis`` by ``angle`` radians."""
+    a = axis / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def pose(V: np.ndarray, F: np.ndarray, rng: np.random.Generator, *, n_tips: int, max_angle: float) -> np.ndarray:
+    """A near-isometric pose variant (n, 3) by ARAP: the central 3 % of the vertices fixed, each
+    extremity patch (4 % of the diagonal) rotated about the point halfway to the centroid."""
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    c = V.mean(axis=0)
+    r = np.linalg.norm(V - c, axis=1)
+    handles, targets = [np.flatnonzero(r <= np.quantile(r, 0.03))], []
+    targets.append(V[handles[0]])
+    for t in extremities(V, n_tips):
+        ids = np.flatnonzero(np.linalg.norm(V - V[t], axis=1) <= 0.04 * diag)
+        pivot = 0.5 * (c + V[t])
+        R = rotation(rng.normal(size=3), np.radians(rng.uniform(-max_angle, max_angle)))
+        handles.append(ids)
+        targets.append((V[ids] - pivot) @ R.T + pivot)
+    b, first = np.unique(np.concatenate(handles), return_index=True)
+    bc = np.concatenate(targets)[first]
+    data = igl.ARAPData()
+    data.max_iter = 20
+    igl.arap_precomputation(V, F, 3, b.astype(np.int32), data)
+    return igl.arap_solve(bc, data, V.copy())
+
+
+def cut_holes(V: np.ndarray, F: np.ndarray, rng: np.random.Generator, n_holes: int) -> tuple[np.ndarray, np.ndarray]:
+    """Remove the faces whose centroid lies within 3 % of the diagonal of ``n_holes`` random vertices."""
+    diag = np.linalg.norm(V.max(0) - V.min(0))
+    centroids = V[F].mean(axis=1)
+    keep = np.ones(len(F), bool)
+    for _ in range(n_holes):
+        keep &= np.linalg.norm(centroids - V[rng.integers(len(V))], axis=1) > 0.03 * diag
+    F = F[keep]
+    used = np.unique(F)
+    remap = -np.ones(len(V), np.int64)
+    remap[used] = np.arange(len(used))
+    return V[used], remap[F]
+
+
+def write_off(path: Path, V: np.ndarray, F: np.ndarray) -> None:
+    with open(path, "w") as fh:
+        fh.write(f"OFF\n{len(V)} {len(F)} 0\n")
+        np.savetxt(fh, V, fmt="%.6f")
+        np.savetxt(fh, np.c_[np.full(len(F), 3), F], fmt="%d")
+
+
+def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float) -> int:
+    """Write the collection into ``out`` (OFF files and labels.csv); returns the number of meshes."""
+    import fast_simplification
+
+    out.mkdir(parents=True, exist_ok=True)
+    rng = np.random.default_rng(seed)
+    rows = ["relative_path,class"]
+    for source in sources:
+        mesh = topomatch.read_mesh(source)
+        V, F = np.asarray(mesh.V, float), np.asarray(mesh.F, np.int64)
+        if len(V) > 20000:
+            V, F = fast_simplification.simplify(V, F, target_reduction=1 - 20000 / len(V) * 0.5)
+            F = F.astype(np.int64)
+        cls = source.name.split(".")[0].split("_watertight")[0]
+        for i in range(int(rng.integers(3, 21))):
+            U, G = pose(V, F, rng, n_tips=int(rng.integers(4, 7)), max_angle=110.0), F
+            if rng.random() < open_fraction:
+                U, G = cut_holes(U, G, rng, int(rng.integers(1, 4)))
+            write_off(out / f"{cls}_{i:02d}.off", U, G)
+            rows.append(f"{cls}_{i:02d}.off,{cls}")
+    (out / "labels.csv").write_text("\n".join(rows) + "\n")
+    return len(rows) - 1
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path)
+    args = ap.parse_args()
+    root = data_root()
+    if root is None:
+        raise SystemExit("set TOPOMATCH_DATA_ROOT (the classic meshes are read from it)")
+    classic = root / "meshes" / "classic"
+    for name, names, seed, open_fraction in (("strong_tune", TUNE, 1, 0.3), ("strong_report", REPORT, 2, 0.0),
+                                             ("strong_report_open", REPORT, 3, 0.6)):
+        n = build([classic / s for s in names], args.out / name, seed=seed, open_fraction=open_fraction)
+        print(f"{args.out / name}: {n} meshes", flush=True)
+
+
+if __name__ == "__main__":
+    main()
