@@ -274,11 +274,6 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
     for item in overrides:
         if "=" not in item:
             raise ConfigError(f"--set {item!r}: expected key=value")
-        head = item.split("=", 1)[0].strip().split(".")[0]
-        field, kind = ("sweep", dict) if head == "sweep" else ("stages", list)
-        if (head == "sweep" or head not in RawConfig.model_fields) and not isinstance(data.get(field, kind()), kind):
-            raise ConfigError(f"--set {item!r}: the config's {field!r} is a {type(data[field]).__name__}, "
-                              f"not a {'mapping' if kind is dict else 'list'}")
         key, text = item.split("=", 1)
         try:
             value = load_yaml(text)
@@ -286,7 +281,7 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
             raise ConfigError(f"--set {item!r}: the value is {exc}") from None
         parts = key.strip().split(".")
         if parts[0] == "sweep" and len(parts) >= 3:  # sweep keys contain a dot: sweep.<stage>.<param>
-            data.setdefault("sweep", {})[".".join(parts[1:])] = value
+            _section(data, "sweep", dict, item)[".".join(parts[1:])] = value
             continue
         if parts[0] in RawConfig.model_fields:
             target = data
@@ -298,7 +293,7 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
             continue
         if len(parts) < 2:
             raise ConfigError(f"--set {key}: expected a config key or stage.param")
-        entries = data.get("stages") or []
+        entries = _section(data, "stages", list, item)
         positions = [i for i, e in enumerate(entries) if _entry_name(e) == parts[0]]
         if len(positions) != 1:
             raise ConfigError(f"--set {key}: the chain has {len(positions)} stages called {parts[0]!r}, expected exactly one")
@@ -308,6 +303,17 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
         _set_path(params, parts[1:], value, f"--set {key}")
         entries[i] = {parts[0]: params}
     return data
+
+
+def _section(data: dict[str, Any], name: str, kind: type, item: str) -> Any:
+    """``data[name]`` (created empty when absent or null) for ``--set item``; a ConfigError when it is not a ``kind``."""
+    if data.get(name) is None:
+        data[name] = kind()
+    section = data[name]
+    if not isinstance(section, kind):
+        raise ConfigError(f"--set {item!r}: the config's {name!r} is a {type(section).__name__}, "
+                          f"not a {'mapping' if kind is dict else 'list'}")
+    return section
 
 
 def _set_path(target: dict[str, Any], path: list[str], value: Any, where: str) -> None:
@@ -410,11 +416,10 @@ def _pairs_from_csv(spec: PairsCsvConfig, one) -> list[InputUnit]:
         missing = [c for c in wanted if c not in row]
         if missing:
             raise InputError(path, f"{where}: no column {missing[0]!r} (columns: {', '.join(map(str, row))})")
-        short = [c for c in wanted if row[c] is None]
+        short = any(row[c] is None for c in wanted)  # DictReader's marks: None values (short), a None key (long)
         if short or None in row:
-            raise InputError(path, f"{where}: {'too few cells' if short else 'too many cells'} for the header "
-                                   f"({len([v for k, v in row.items() if k is not None and v is not None])} "
-                                   f"of {len([k for k in row if k is not None])} columns)")
+            raise InputError(path, f"{where}: {'too few' if short else 'too many'} cells for the "
+                                   f"{len(row) - (None in row)} columns of the header")
         cells = {name: row[col].strip() for name, col in spec.truth_columns.items()}
         if any(v == "" for v in cells.values()):
             if spec.skip_missing_truth:

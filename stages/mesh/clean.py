@@ -38,7 +38,7 @@ from topomatch.pipeline.contract import InputError, Params, StageResult, stage
 from topomatch.stages.mesh.measures import bbox_diagonal
 from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.mesh.topology import TopologyReport, topology_report
+from topomatch.stages.mesh.topology import TopologyReport, edge_graph_components, topology_report
 
 
 class CleanParams(Params):
@@ -194,13 +194,8 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
 def _face_components(F: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
     """(number of connected components, (m,) component of each face) of a mesh without unreferenced
     vertices; components are numbered by their smallest vertex, as ``igl.vertex_components`` numbers them."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    u, w = F.ravel(), F[:, [1, 2, 0]].ravel()
-    count, labels = connected_components(coo_matrix((np.ones(u.size, dtype=bool), (u, w)),
-                                                    shape=(n_vertices, n_vertices)), directed=False)
-    return int(count), np.asarray(labels, dtype=np.int64)[F[:, 0]]
+    count, labels = edge_graph_components(np.column_stack([F.ravel(), F[:, [1, 2, 0]].ravel()]), n_vertices)
+    return count, np.asarray(labels, dtype=np.int64)[F[:, 0]]
 
 
 EXTENT_RANGE = (1e-50, 1e50)
@@ -276,13 +271,14 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
         unreferenced += n_before - V.shape[0]
 
     unchanged = V is mesh.V and F is mesh.F  # nothing was repaired: the topology is the one measured
-    n_components = before.n_components if unchanged else _face_components(F, V.shape[0])[0]
+    n_components, face_label = (before.n_components, None) if unchanged else _face_components(F, V.shape[0])
     dropped_components = dropped_faces = dropped_vertices = 0
     if n_components > 1 and params.components == "fail":
         raise InputError(mesh.name, f"mesh has {n_components} connected components; "
                                     "pass clean.components=largest or clean.components=keep_all")
     if n_components > 1 and params.components == "largest":
-        _, face_label = _face_components(F, V.shape[0])
+        if face_label is None:
+            _, face_label = _face_components(F, V.shape[0])
         keep = int(np.argmax(np.bincount(face_label, minlength=n_components)))
         mask = face_label == keep
         dropped_components = n_components - 1

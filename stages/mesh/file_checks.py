@@ -197,8 +197,10 @@ def check_obj(plain: Path, path: Path) -> FileFacts:
     data = plain.read_bytes()
     polygons = 0
     n_faces = 0
+    face_refs = []
     for m in _OBJ_FACE.finditer(data):
         refs = m.group(1).split(b"#", 1)[0].split()
+        face_refs.append(b" ".join(refs))
         n_faces += 1
         if len(refs) < 3:
             raise InputError(path, f"face {n_faces} ({m.group(0)[:60].decode('utf-8', 'replace')!r}) has "
@@ -206,7 +208,7 @@ def check_obj(plain: Path, path: Path) -> FileFacts:
         polygons += len(refs) > 3
     if n_faces == 0:
         raise InputError(path, "OBJ file has no faces ('f' lines)")
-    _check_index_width(b"\n".join(m.group(1).replace(b"/", b" ") for m in _OBJ_FACE.finditer(data)), path, None)
+    _check_index_width(b"\n".join(face_refs).replace(b"/", b" "), path, None)
     return FileFacts(None, n_faces, polygons)
 
 

@@ -165,7 +165,7 @@ def _compact_faces(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
     return new_index[F], n_ref
 
 
-def _components(E: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
+def edge_graph_components(E: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
     """Connected components of the graph of the edges ``E`` (k, 2) on ``n_vertices`` vertices: (count, labels)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
@@ -179,7 +179,7 @@ def _count_boundary_loops(E_boundary: np.ndarray, n_vertices: int) -> int:
     """Connected components of the graph formed by the boundary edges (k, 2)."""
     if len(E_boundary) == 0:
         return 0
-    _, labels = _components(E_boundary, n_vertices)
+    _, labels = edge_graph_components(E_boundary, n_vertices)
     return int(np.unique(labels[np.unique(E_boundary)]).size)
 
 
@@ -267,7 +267,7 @@ def topology_report(mesh: Mesh) -> TopologyReport:
     n_boundary_edges = int(boundary.sum())
     n_nonmanifold_edges = int((counts > 2).sum())
     n_nonmanifold_vertices = int(nonmanifold_vertices(Fc, n_ref, he).sum())
-    n_components = _components(E, n_ref)[0]
+    n_components = edge_graph_components(E, n_ref)[0]
     n_boundary_loops = _count_boundary_loops(E[boundary], n_ref)
     chi = n_ref - n_edges + int(Fc.shape[0])
     is_manifold = n_nonmanifold_edges == 0 and n_nonmanifold_vertices == 0

@@ -16,6 +16,7 @@ image of different dimensionality.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,10 +49,10 @@ def max_pixels() -> int:
 
 def _check_size(path: Path, shape: tuple[int, ...]) -> None:
     """Refuse an image whose header declares more than :func:`max_pixels` pixels."""
-    n = int(np.prod([int(s) for s in shape], dtype=np.float64)) if shape else 0
-    if n > max_pixels():
+    n, limit = math.prod(int(s) for s in shape), max_pixels()
+    if n > limit:
         raise InputError(path, f"the header declares {' x '.join(str(int(s)) for s in shape)} = {n:,} pixels, "
-                               f"above the limit of {max_pixels():,} (set TOPOMATCH_MAX_IMAGE_PIXELS to raise it)")
+                               f"above the limit of {limit:,} (set TOPOMATCH_MAX_IMAGE_PIXELS to raise it)")
 
 
 def image_format(path: str | Path) -> str:

@@ -314,6 +314,7 @@ class _Run:
         on the coarse search's measure, 2 and 6 search pixels from the result.)"""
         if self.params.check.min_flatness <= 0:
             return []
+        self.grid()  # builds the search images (once)
         f = self.search_images.factor
         ratio, u = flatness(lambda t: self.search_images.score(t, min_overlap=0.0), theta, step=2.0 * f,
                             reach=6.0 * f, radius=self.radius)
