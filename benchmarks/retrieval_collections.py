@@ -4,12 +4,18 @@ Usage::
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_collections.py OUT_DIR
 
-Builds, from the shared classic meshes, three labelled collections (OFF files + ``labels.csv``):
+Builds, from the shared classic and Watertight meshes, six labelled collections (OFF files + ``labels.csv``):
 
 * ``strong_tune`` (seed 1, 30 % open): 9 source shapes (human, ant, octopus, teddy, four-legged
   animal, cat, koala, camel, scorpion) -- the split where fusion settings may be chosen;
 * ``strong_report`` (seed 2, closed) and ``strong_report_open`` (seed 3, 60 % open): 9 other
-  sources (two humans, horse, cow, armadillo, hand, pliers, stuffed toy, glasses) -- reported only.
+  sources (two humans, horse, cow, armadillo, hand, pliers, stuffed toy, glasses) -- reported only;
+* ``similar_tune`` (seed 4) and ``similar_report`` (seed 5), 50 % open: similar sources in separate
+  classes (four humans, two octopuses, two armadillos, a teddy; three four-legged animals, three
+  hands, an ant, two humans), so that classes differ in detail, not in kind;
+* ``hard_tune`` (seed 6, 60 % open): the 15 tune sources that no report collection shares, similar
+  ones side by side -- a tune collection on which no part is near perfect (strong_tune and
+  similar_tune are: their best part reaches 0.98-1.00 mAP, so they cannot tell settings apart).
 
 Each source gives a class of 3 to 20 near-isometric pose variants: ARAP (libigl ``arap``) with
 the core patch fixed and 4-6 extremity patches rotated by up to 110 degrees about the point halfway
@@ -36,6 +42,15 @@ TUNE = ["human_watertight1.off", "ant_watertight81.off", "octopus_watertight121.
 REPORT = ["odedstein_human_man.obj", "odedstein_human_woman.obj", "horse_cyberware.ply",
           "odedstein_cow-low-resolution.obj", "odedstein_armadillo.obj", "hand_watertight181.off",
           "plier_watertight201.off", "odedstein_stuffedtoy.obj", "glasses_watertight41.off"]
+#: Similar sources in separate classes (four humans, two octopuses, ...): Watertight meshes, by class/file.
+SIMILAR_TUNE = ["human/1.off.gz", "human/5.off.gz", "human/9.off.gz", "human/14.off.gz", "octopus/121.off.gz",
+                "octopus/125.off.gz", "teddy/161.off.gz", "armadillo/281.off.gz", "armadillo/285.off.gz"]
+#: The tune sources that no report collection shares (strong_tune's ant 81 and fourleg 381 are also
+#: similar_report sources, in other poses), with every similar tune source but human 1 (a strong_tune source).
+HARD_TUNE_CLASSIC = [s for s in TUNE if not s.startswith(("ant_", "fourleg_"))]
+SIMILAR_REPORT = ["fourleg/381.off.gz", "fourleg/385.off.gz", "fourleg/390.off.gz", "hand/181.off.gz",
+                  "hand/185.off.gz", "hand/190.off.gz", "ant/81.off.gz", "../classic/odedstein_human_man.obj",
+                  "../classic/odedstein_human_woman.obj"]
 
 
 def extremities(V: np.ndarray, k: int) -> list[int]:
@@ -113,6 +128,8 @@ def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float) ->
             V, F = fast_simplification.simplify(V, F, target_reduction=1 - 20000 / len(V) * 0.5)
             F = F.astype(np.int64)
         cls = source.name.split(".")[0].split("_watertight")[0]
+        if source.parent.parent.name == "shrec07_watertight":
+            cls = f"{source.parent.name}{cls}"  # human/5.off.gz -> human5
         for i in range(int(rng.integers(3, 21))):
             U, G = pose(V, F, rng, n_tips=int(rng.integers(4, 7)), max_angle=110.0), F
             if rng.random() < open_fraction:
@@ -126,14 +143,23 @@ def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float) ->
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path)
+    ap.add_argument("--only", nargs="*", help="build only these collections")
     args = ap.parse_args()
     root = data_root()
     if root is None:
         raise SystemExit("set TOPOMATCH_DATA_ROOT (the classic meshes are read from it)")
-    classic = root / "meshes" / "classic"
-    for name, names, seed, open_fraction in (("strong_tune", TUNE, 1, 0.3), ("strong_report", REPORT, 2, 0.0),
-                                             ("strong_report_open", REPORT, 3, 0.6)):
-        n = build([classic / s for s in names], args.out / name, seed=seed, open_fraction=open_fraction)
+    classic, watertight = root / "meshes" / "classic", root / "meshes" / "shrec07_watertight"
+    for name, sources, seed, open_fraction in (
+            ("strong_tune", [classic / s for s in TUNE], 1, 0.3),
+            ("strong_report", [classic / s for s in REPORT], 2, 0.0),
+            ("strong_report_open", [classic / s for s in REPORT], 3, 0.6),
+            ("similar_tune", [watertight / s for s in SIMILAR_TUNE], 4, 0.5),
+            ("similar_report", [watertight / s for s in SIMILAR_REPORT], 5, 0.5),
+            ("hard_tune", [classic / s for s in HARD_TUNE_CLASSIC] + [watertight / s for s in SIMILAR_TUNE[1:]], 6,
+             0.6)):
+        if args.only and name not in args.only:
+            continue
+        n = build(sources, args.out / name, seed=seed, open_fraction=open_fraction)
         print(f"{args.out / name}: {n} meshes", flush=True)
 
 

@@ -187,6 +187,8 @@ class IndexReport:
     n_files: int
     parts: list[PartReport]
     seconds: float
+    open_meshes: list[str] = field(default_factory=list)  # meshes indexed now that have boundaries
+    multi_component_meshes: list[str] = field(default_factory=list)  # ... with several components (largest kept)
 
     @property
     def failed(self) -> int:
@@ -202,6 +204,10 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     One work unit per mesh runs every part method of ``method`` on it, so the stages the parts
     share (load, clean, decimate, spectrum) are computed once, in memory, and the workers share out
     the meshes. Unchanged meshes (same content, method and parameters) are skipped.
+
+    Open meshes (with boundaries) are indexed as they are: the Laplace-Beltrami operator of the
+    intrinsic parts has natural (Neumann) boundary conditions and the skeleton's geodesics stay on
+    the surface; a mesh with several components keeps its largest. :class:`IndexReport` lists both.
 
     Raises
     ------
@@ -221,6 +227,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     label_of = read_labels(labels) if labels else {}
     db_path = Path(db)
     hashes = {str(f): hash_file(f) for f in files}
+    shapes: dict[str, Any] = {}  # mesh -> the clean of its full mesh (topology before and after)
     t0 = time.perf_counter()
     plans: dict[str, tuple[PartReport, dict]] = {}
     todo: dict[str, list] = {}  # mesh -> its part items: one work unit, the shared stages computed once
@@ -247,6 +254,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
                               status="ok" if r.ok else "failed", reason=r.error,
                               n_endpoints=None if d is None else d.n_endpoints, kind=None if d is None else d.kind,
                               descriptor=None if d is None else d.data, seconds=sum(r.seconds.values()))
+                    shapes.setdefault(r.input_path, _first_clean(r))
                     report.done += r.ok
                     report.failed += not r.ok
                     report.seconds += sum(r.seconds.values())
@@ -257,7 +265,15 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
             if report.failed:
                 report.failures = [row.reason or "" for row in store.rows(report.method, report.params_hash,
                                                                           status="failed")]
-    return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0)
+    cleans = {path: c for path, c in shapes.items() if c is not None}
+    return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0,
+                       sorted(p for p, c in cleans.items() if c.after.n_boundary_loops > 0),
+                       sorted(p for p, c in cleans.items() if c.dropped_components > 0))
+
+
+def _first_clean(result: ItemResult) -> Any:
+    """The first clean of an item's chain (the full mesh's: topology before and after), or None."""
+    return next((r for r in result.results.values() if hasattr(r, "dropped_components")), None)
 
 
 # --------------------------------------------------------------------------- query / evaluate
@@ -269,7 +285,8 @@ class QueryResult:
 
     ``results``: one entry per shape, ``rank``, ``path``, ``label``, ``dissimilarity``, ``endpoints``
     (its endpoint count, or None); ``endpoints``: the query's endpoint count (or None); ``seconds``:
-    ``descriptor`` and ``ranking``; ``indexed``: the shapes ranked.
+    ``descriptor`` and ``ranking``; ``indexed``: the shapes ranked; ``fusion`` (fused methods): the
+    parts kept and dropped by the screening, their agreement and the re-ranking neighbours.
     """
 
     query: str
@@ -278,6 +295,7 @@ class QueryResult:
     indexed: int
     seconds: dict[str, float]
     results: list[dict[str, Any]]
+    fusion: dict[str, Any] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -292,10 +310,11 @@ class Evaluation:
     matrix: str
     matrix_seconds: float
     metrics: Any = field(repr=False)  # RetrievalMetrics
+    fusion: dict[str, Any] | None = None  # fusions: FusionDecision.to_dict()
 
     def to_dict(self) -> dict[str, Any]:
         return {"method": self.method, "n": self.n, "matrix": self.matrix, "matrix_seconds": self.matrix_seconds,
-                **self.metrics.as_dict()}
+                **self.metrics.as_dict(), **({"fusion": self.fusion} if self.fusion is not None else {})}
 
 
 class Collection:
@@ -346,21 +365,24 @@ class Collection:
         """A part's matching options: the given ones for a single method, each part's own in a fusion."""
         return get_method(part).match_options() if method.kind == "fusion" else _options(method, options)
 
-    def matrix(self, method: str, descriptors: dict[str, list[Descriptor]],
-               options: dict[str, Any] | None = None) -> np.ndarray:
-        """Full dissimilarity matrix of ``method`` (fused and re-ranked for a fusion)."""
-        from topomatch.stages.retrieval.fusion import fused_matrix
+    def part_matrices(self, method: str, descriptors: dict[str, list[Descriptor]],
+                      options: dict[str, Any] | None = None) -> list[np.ndarray]:
+        """The (n, n) dissimilarity matrix of each part of ``method`` (itself for a single method)."""
         from topomatch.stages.retrieval.ranking import dissimilarity_matrix
 
         m = get_method(method)
-        parts = [dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
-        return fused_matrix(parts, m.fusion) if m.fusion is not None else parts[0]
+        return [dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
+
+    def matrix(self, method: str, descriptors: dict[str, list[Descriptor]],
+               options: dict[str, Any] | None = None) -> np.ndarray:
+        """Full dissimilarity matrix of ``method`` (fused and re-ranked for a fusion)."""
+        return _combined(get_method(method), self.part_matrices(method, descriptors, options))
 
     def query(self, mesh: str | Path, *, k: int = 10, method: str = DEFAULT_METHOD,
               options: dict[str, Any] | None = None) -> QueryResult:
         """The ``k`` closest indexed shapes to a mesh file (its descriptors go through the index's cache)."""
         from topomatch.stages.retrieval.fusion import fused_query
-        from topomatch.stages.retrieval.ranking import dissimilarities, dissimilarity_matrix
+        from topomatch.stages.retrieval.ranking import dissimilarities
 
         if not (isinstance(k, int) and k >= 1):
             raise ConfigError(f"k must be a whole number of at least 1, got {k!r}")
@@ -371,9 +393,10 @@ class Collection:
         t_desc = time.perf_counter() - t
         t = time.perf_counter()
         rows_d = [dissimilarities(query[p], descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
+        decision = None
         if m.fusion is not None:
-            mats = [dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
-            d = fused_query(rows_d, mats, m.fusion)
+            mats = self.part_matrices(method, descriptors, options)
+            d, decision = fused_query(rows_d, mats, m.fusion), _decision(m, mats)
         else:
             d = rows_d[0]
         order = np.argsort(d, kind="stable")[:k]
@@ -382,7 +405,7 @@ class Collection:
         results = [{"rank": i + 1, "path": rows[j].path, "label": rows[j].label, "dissimilarity": float(d[j]),
                     "endpoints": rows[j].n_endpoints} for i, j in enumerate(order) if np.isfinite(d[j])]
         return QueryResult(str(mesh), method, endpoints, len(rows), {"descriptor": t_desc, "ranking": t_rank},
-                           results)
+                           results, decision)
 
     def evaluate(self, *, method: str = DEFAULT_METHOD, options: dict[str, Any] | None = None,
                  out: str | Path | None = None) -> Evaluation:
@@ -405,11 +428,27 @@ class Collection:
                                       f"{max(sizes.values())}): nothing to evaluate (PSB evaluates a query only when "
                                       f"its class has at least {PSB_CUTOFF + 1} members)")
         t = time.perf_counter()
-        D = self.matrix(method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, options)
+        m = get_method(method)
+        parts = self.part_matrices(method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, options)
+        D = _combined(m, parts)
         seconds = time.perf_counter() - t
         metrics = retrieval_metrics(D, labels)
         np.savez_compressed(path, D=D, paths=np.array([r.path for r in rows]), labels=labels)
-        return Evaluation(method, len(rows), str(path), seconds, metrics)
+        return Evaluation(method, len(rows), str(path), seconds, metrics, _decision(m, parts))
+
+
+def _combined(method: Method, part_matrices: list[np.ndarray]) -> np.ndarray:
+    """A method's (n, n) matrix from its parts' (fused and re-ranked for a fusion)."""
+    from topomatch.stages.retrieval.fusion import fused_matrix
+
+    return fused_matrix(part_matrices, method.fusion) if method.fusion is not None else part_matrices[0]
+
+
+def _decision(method: Method, part_matrices: list[np.ndarray]) -> dict[str, Any] | None:
+    """What a fusion did on a database (parts kept and dropped, their agreement, re-ranking k); None otherwise."""
+    from topomatch.stages.retrieval.fusion import decide
+
+    return decide(part_matrices, method.fusion).to_dict() if method.fusion is not None else None
 
 
 def open_index(db: str | Path) -> Collection:

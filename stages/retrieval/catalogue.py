@@ -14,7 +14,9 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
 - ``agd``: intrinsic skeleton (average geodesic distance) with heat-kernel endpoint signatures;
 - ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum;
 - ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
-- ``topomatch``: the fusion of agd, hks, shapedna, d2 and sh, re-ranked by manifold ranking.
+- ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (parts that agree with the
+  others at chance level dropped, order-weighted, re-ranked by manifold ranking);
+  ``topomatch-equal``: the first fusion (equal weights, k = 10), kept for comparison.
 
 The intrinsic methods (agd, hks) work on a copy decimated to 6,000 faces and share its 60
 leading eigenpairs through the stage cache (:data:`SPECTRAL_CHAIN`).
@@ -88,11 +90,14 @@ class Method:
         return MatchOptions.model_validate({"unmatched_cost": self.unmatched_cost, **given})
 
 
+#: The parts of the fusions.
+FUSION_PARTS = ("agd", "hks", "shapedna", "d2", "sh")
+
 METHODS: dict[str, Method] = {m.name: m for m in (
     Method("rgpd", "mixture-distance skeleton endpoints (thesis ch. 3)", "endpoints",
-           tuple(skeleton_chain("mixture")) + ("endpoint_descriptor",), unmatched_cost=0.2),
+           tuple(skeleton_chain("mixture")) + ("endpoint_descriptor",), unmatched_cost=0.3),
     Method("srg", "Fiedler-vector skeleton endpoints (thesis ch. 4)", "endpoints",
-           tuple(skeleton_chain("fiedler")) + ("endpoint_descriptor",), unmatched_cost=0.2),
+           tuple(skeleton_chain("fiedler")) + ("endpoint_descriptor",), unmatched_cost=0.3),
     Method("agd", "intrinsic skeleton (average geodesic distance) with heat-kernel endpoint signatures",
            "endpoints", SPECTRAL_CHAIN + ({"morse": {"function": "agd"}}, "level_sets", "reeb_graph", "prune",
                                           "endpoint_hks_descriptor"), unmatched_cost=0.5),
@@ -104,12 +109,18 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            distance=d2.distance_matrix),
     Method("sh", "rotation-invariant spherical harmonics (Kazhdan 2003)", "vector",
            CLEAN_CHAIN + ("spherical_harmonics",), distance=spherical_harmonics.distance_matrix),
-    Method("topomatch", "fusion of agd, hks, shapedna, d2 and sh, re-ranked by manifold ranking", "fusion",
-           fusion=Fusion(("agd", "hks", "shapedna", "d2", "sh"), rerank_k=10, rerank_alpha=0.9)),
+    Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: parts screened by their agreement, "
+           "order-weighted (the smallest of a pair's scaled dissimilarities count most), re-ranked by manifold ranking "
+           "(k from the collection's size)", "fusion",
+           fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.9, order_weights=(1, 1, 0.5, 0.25),
+                         screen=0.65)),
+    Method("topomatch-equal", "the first fusion (kept for comparison): agd, hks, shapedna, d2 and sh with equal "
+           "weights, manifold ranking with k = 10", "fusion",
+           fusion=Fusion(FUSION_PARTS, rerank_k=10, rerank_alpha=0.9)),
 )}
 
-#: Default of the commands on a collection (index, query, evaluate): the best method on SHREC'07
-#: Watertight (docs/retrieval.md).
+#: Default of the commands on a collection (index, query, evaluate): the adaptive fusion, chosen by
+#: the selection protocol of docs/retrieval.md (tune collections only) and reported on the others.
 DEFAULT_METHOD = "topomatch"
 
 #: Default of ``match`` (two meshes, no collection): the best method that compares two shapes on

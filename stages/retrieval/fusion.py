@@ -1,50 +1,90 @@
-"""Fusion of several descriptors' dissimilarities, and manifold-ranking re-ranking.
+"""Fusion of several descriptors' dissimilarities: part screening, order-weighted combination, re-ranking.
 
-A fused retrieval method (a record of :mod:`topomatch.stages.retrieval.catalogue`, e.g.
-``topomatch``) ranks shapes by several complementary
-descriptors at once: the intrinsic skeleton (AGD Reeb graph with heat-kernel endpoint
-signatures), the heat-kernel-signature histograms, ShapeDNA, D2 and the spherical harmonic
-descriptor. Each part's dissimilarities are divided by that part's **median dissimilarity over
-the database** (so every part has the same typical size and none dominates by its units), and
-the parts are summed with equal weights (no weight was fitted to a benchmark).
+A fused retrieval method (a record of :mod:`topomatch.stages.retrieval.catalogue`, e.g. ``topomatch``)
+ranks shapes by several complementary descriptors at once (the intrinsic skeleton, heat-kernel
+signatures, ShapeDNA, D2, spherical harmonics). Each part's dissimilarities are first divided by
+that part's **median dissimilarity over the database**, so that every part has the same typical size.
+Then, with no labels, from the collection itself:
 
-Re-ranking (optional, on by default for ``topomatch``): **manifold ranking** (D. Zhou, J. Weston,
-A. Gretton, O. Bousquet, B. Schölkopf, "Ranking on data manifolds", NIPS 2003). The collection
-becomes a k-nearest-neighbour graph with affinities ``W_ij = exp(-d_ij^2 / (s_i s_j))`` (local
-scaling: ``s_i`` = distance to the i-th item's k-th neighbour; L. Zelnik-Manor, P. Perona,
-NIPS 2004), symmetrised and normalised ``S = D^-1/2 W D^-1/2``; the ranking scores are
-``F = (I - alpha S)^-1``, i.e. similarity diffused along the graph, so two shapes related through
-a chain of close neighbours rank higher than their direct distance says. It uses the database's
-own structure (no labels). The output dissimilarity is ``1 - F_ij / max F`` for a collection
-and ``1 - F_qj / max_j F_qj`` over the database items j for one query (one linear solve; the
-best match gets 0): rankings are those of the scores; values compare within a row. Cost: O(n^3) dense linear algebra, about 0.02 s for 400
-shapes; for very large indexes rank without it (``rerank_k: null``).
+1. **Screening** (``screen``): each part's k = 5 nearest neighbours of every database item are
+   compared with every other part's; a part whose mean overlap (its *agreement*) is below
+   ``screen`` times the best part's is dropped. A part that carries no class information on a
+   collection (D2 or spherical harmonics on articulated shapes in new poses) agrees with the
+   others at chance level; parts that see the same classes agree far above it (measured in
+   docs/retrieval.md: 0.04-0.08 against 0.19-0.47).
+2. **Order-weighted averaging** (``order_weights``; R. R. Yager, IEEE SMC 1988): for each pair of
+   shapes the parts' scaled dissimilarities are sorted, smallest first, and averaged with
+   decreasing weights, so a pair that two parts find close is close even when a third finds it
+   far: one part's failure on a pair (a pose, a hole, a scale) does not drag the pair apart.
+   ``None`` gives every part the same weight (a plain sum).
+3. **Manifold ranking** (``rerank_k``; D. Zhou et al., "Ranking on data manifolds", NIPS 2003):
+   the collection becomes a k-nearest-neighbour graph with affinities
+   ``W_ij = exp(-d_ij^2 / (s_i s_j))`` (local scaling, ``s_i`` = distance to the k-th neighbour;
+   Zelnik-Manor and Perona, NIPS 2004), symmetrised and normalised ``S = D^-1/2 W D^-1/2``; the
+   scores ``F = (I - alpha S)^-1`` diffuse similarity along the graph. ``rerank_k='auto'`` ties k
+   to the collection's size, ``round(sqrt(n) / 2)`` (at least 3): 5 for 100 shapes, 10 for 400,
+   so small collections (and small classes) are not smoothed across classes.
+   The output is ``1 - F_ij / max F`` for a collection and ``1 - F_qj / max_j F_qj`` over the
+   database items j for one query (one linear solve; the best match gets 0). O(n^3): about
+   0.02 s for 400 shapes; for very large indexes rank without it (``rerank_k: null``).
+
+Every setting was chosen by the selection protocol of docs/retrieval.md (tune collections only).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, replace
+from typing import Literal
 
 import numpy as np
+
+#: Neighbours compared by the screening's agreement.
+AGREEMENT_NEIGHBOURS = 5
 
 
 @dataclass(frozen=True)
 class Fusion:
-    """A fused retrieval method: its part methods, and the manifold-ranking settings.
+    """A fused retrieval method: its parts, how they are combined and how the result is re-ranked.
 
     Attributes
     ----------
     parts : tuple of str
-        Method names (keys of :data:`topomatch.stages.retrieval.catalogue.METHODS`), equally weighted.
-    rerank_k : int or None
-        Neighbours of the manifold-ranking graph; None = no re-ranking.
+        Method names (keys of :data:`topomatch.stages.retrieval.catalogue.METHODS`).
+    rerank_k : int, 'auto' or None
+        Neighbours of the manifold-ranking graph ('auto': :func:`rerank_neighbours`); None = no re-ranking.
     rerank_alpha : float
         Diffusion weight in (0, 1).
+    order_weights : tuple of float, optional
+        Weights of the smallest, second smallest, ... scaled dissimilarity of a pair (truncated to
+        the parts kept, then normalised); None = equal weights (a plain sum).
+    screen : float, optional
+        Drop parts whose agreement is below ``screen`` times the best part's; None = keep all.
     """
 
     parts: tuple[str, ...]
-    rerank_k: int | None
+    rerank_k: int | Literal["auto"] | None
     rerank_alpha: float
+    order_weights: tuple[float, ...] | None = None
+    screen: float | None = None
+
+    def with_parts(self, parts, rerank_k=...) -> "Fusion":
+        """The same fusion over other parts (and optionally another ``rerank_k``)."""
+        return replace(self, parts=tuple(parts), **({} if rerank_k is ... else {"rerank_k": rerank_k}))
+
+
+@dataclass(frozen=True)
+class FusionDecision:
+    """What a fusion did on a collection: which parts it kept (and why), and the re-ranking neighbours."""
+
+    kept: tuple[str, ...]
+    dropped: tuple[str, ...]
+    agreement: dict[str, float]  # empty when the fusion does not screen
+    rerank_k: int | None
+
+    def to_dict(self) -> dict:
+        return {"kept": list(self.kept), "dropped": list(self.dropped),
+                "agreement": {p: round(a, 4) for p, a in self.agreement.items()}, "rerank_k": self.rerank_k}
 
 
 def median_scale(D: np.ndarray) -> float:
@@ -56,11 +96,65 @@ def median_scale(D: np.ndarray) -> float:
     return scale if scale > 0 else 1.0
 
 
-def fuse(parts: list[np.ndarray], scales: list[float]) -> np.ndarray:
-    """Equal-weight sum of dissimilarity arrays (any common shape), each divided by its scale."""
+def fuse(parts: list[np.ndarray], scales: list[float], order_weights: tuple[float, ...] | None = None) -> np.ndarray:
+    """Combination of dissimilarity arrays (any common shape), each divided by its scale.
+
+    Equal weights (a sum) when ``order_weights`` is None; else, element by element, the weighted
+    mean of the scaled values sorted smallest first (weights truncated to ``len(parts)``).
+    """
     if not parts:
         raise ValueError("fuse: no parts")
-    return sum(np.asarray(P, dtype=np.float64) / s for P, s in zip(parts, scales))
+    scaled = [np.asarray(P, dtype=np.float64) / s for P, s in zip(parts, scales)]
+    if order_weights is None:
+        return sum(scaled)
+    w = np.asarray(order_weights[: len(scaled)], dtype=np.float64)
+    stack = np.stack(scaled)
+    # only the len(w) smallest values of each element are weighted: partial sort
+    smallest = np.sort(stack, axis=0) if len(w) == len(scaled) else \
+        np.partition(stack, list(range(len(w))), axis=0)[: len(w)]
+    return np.tensordot(w / w.sum(), smallest, axes=1)
+
+
+def _neighbour_sets(D: np.ndarray, k: int) -> np.ndarray:
+    """(n, n) bool: row i marks the k nearest other items of item i (ties broken arbitrarily)."""
+    D = np.array(D, dtype=np.float64)
+    D[~np.isfinite(D)] = np.inf
+    np.fill_diagonal(D, np.inf)
+    n = len(D)
+    near = np.argpartition(D, k - 1, axis=1)[:, :k]
+    mask = np.zeros((n, n), dtype=bool)
+    mask[np.arange(n)[:, None], near] = True
+    return mask
+
+
+def agreement(part_matrices: list[np.ndarray], k: int = AGREEMENT_NEIGHBOURS) -> np.ndarray:
+    """(P,) mean overlap of each part's k-nearest-neighbour sets with every other part's, in [0, 1]."""
+    n = len(part_matrices[0])
+    if len(part_matrices) < 2 or n < 3:
+        return np.ones(len(part_matrices))
+    k = min(k, n - 1)
+    sets = [_neighbour_sets(P, k) for P in part_matrices]
+    pair = np.array([[np.logical_and(a, b).sum() / (n * k) for b in sets] for a in sets])
+    return (pair.sum(axis=1) - np.diag(pair)) / (len(sets) - 1)
+
+
+def rerank_neighbours(fusion: Fusion, n: int) -> int | None:
+    """The manifold-ranking neighbours of ``fusion`` on a graph of ``n`` items (None: no re-ranking)."""
+    if fusion.rerank_k == "auto":
+        return max(3, int(round(math.sqrt(n) / 2)))
+    return fusion.rerank_k
+
+
+def decide(part_matrices: list[np.ndarray], fusion: Fusion, graph_size: int | None = None) -> FusionDecision:
+    """Screen the parts of ``fusion`` on a database's (n, n) part matrices (module docstring, step 1)."""
+    n = graph_size if graph_size is not None else len(part_matrices[0])
+    if fusion.screen is None:
+        return FusionDecision(fusion.parts, (), {}, rerank_neighbours(fusion, n))
+    a = agreement(part_matrices)
+    keep = a >= fusion.screen * a.max()
+    return FusionDecision(tuple(p for p, k in zip(fusion.parts, keep) if k),
+                          tuple(p for p, k in zip(fusion.parts, keep) if not k),
+                          {p: float(x) for p, x in zip(fusion.parts, a)}, rerank_neighbours(fusion, n))
 
 
 def _ranking_graph(D: np.ndarray, k: int) -> np.ndarray:
@@ -120,26 +214,37 @@ def manifold_ranking_row(D: np.ndarray, row: int, k: int = 10, alpha: float = 0.
     return 1.0 - f / f.max()
 
 
+def _kept(items: list, fusion: Fusion, decision: FusionDecision) -> list:
+    return [x for p, x in zip(fusion.parts, items) if p in decision.kept]
+
+
 def fused_matrix(part_matrices: list[np.ndarray], fusion: Fusion) -> np.ndarray:
-    """(n, n) fused (and re-ranked) dissimilarities of a collection from its parts' (n, n) matrices."""
-    D = fuse(part_matrices, [median_scale(P) for P in part_matrices])
-    return manifold_ranking(D, fusion.rerank_k, fusion.rerank_alpha) if fusion.rerank_k else D
+    """(n, n) fused (and re-ranked) dissimilarities of a collection from its parts' (n, n) matrices
+    (what was kept and why: :func:`decide`)."""
+    decision = decide(part_matrices, fusion)
+    mats = _kept(part_matrices, fusion, decision)
+    D = fuse(mats, [median_scale(P) for P in mats], fusion.order_weights)
+    k = decision.rerank_k
+    return manifold_ranking(D, k, fusion.rerank_alpha) if k else D
 
 
 def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], fusion: Fusion) -> np.ndarray:
     """(n,) fused dissimilarities of one query to a database.
 
     ``query_rows``: per part, the (n,) dissimilarities of the query to the database;
-    ``part_matrices``: per part, the database's (n, n) matrix (scales, and the graph for re-ranking:
-    the query joins the database's graph as an (n + 1)-th item).
+    ``part_matrices``: per part, the database's (n, n) matrix (screening, scales, and the graph for
+    re-ranking: the query joins the database's graph as an (n + 1)-th item). The screening looks at
+    the database alone, so every query of a database uses the same parts.
     """
-    scales = [median_scale(P) for P in part_matrices]
-    row = fuse(query_rows, scales)
-    if not fusion.rerank_k:
+    n = len(query_rows[0])
+    decision = decide(part_matrices, fusion, graph_size=n + 1)
+    rows, mats = _kept(query_rows, fusion, decision), _kept(part_matrices, fusion, decision)
+    scales = [median_scale(P) for P in mats]
+    row = fuse(rows, scales, fusion.order_weights)
+    if not decision.rerank_k:
         return row
-    n = len(row)
     A = np.zeros((n + 1, n + 1))
-    A[:n, :n] = fuse(part_matrices, scales)
+    A[:n, :n] = fuse(mats, scales, fusion.order_weights)
     A[n, :n] = A[:n, n] = row
-    score = 1.0 - manifold_ranking_row(A, n, fusion.rerank_k, fusion.rerank_alpha)[:n]  # the query's own node left out
+    score = 1.0 - manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha)[:n]  # the query's own node left out
     return 1.0 - score / score.max()  # 0 for the best database match

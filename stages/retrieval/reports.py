@@ -17,9 +17,10 @@ metrics (:mod:`topomatch.stages.retrieval.metrics`), and writes:
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -39,8 +40,8 @@ class MethodsParams(Params):
                                                                  "be in methods), e.g. [topomatch]")
     extra_fusions: dict[str, list[str]] = Field(default_factory=dict, description="ad-hoc fusions for experiments: "
                                                 "name -> methods (re-ranked like the default fusion)")
-    rerank_k: int | None = Field(None, ge=1, description="fusions: neighbours of the manifold-ranking graph "
-                                                         "(none: the fusion's own)")
+    rerank_k: Annotated[int, Field(ge=1)] | Literal["auto"] | None = Field(None, description="fusions: neighbours of the manifold-ranking "
+                                                   "graph, or auto (round(sqrt(n) / 2)); none: the fusion's own")
     rerank_alpha: float | None = Field(None, gt=0, lt=1, description="fusions: manifold-ranking diffusion weight "
                                                                      "(none: the fusion's own)")
     labels: str = Field(description="CSV with relative_path and class columns (path template)")
@@ -76,15 +77,14 @@ class MethodsParams(Params):
         """The catalogue fusions and the ad-hoc ones, with this report's re-ranking overrides."""
         base = {name: get_method(name).fusion for name in self.fusions}
         default = get_method(DEFAULT_METHOD).fusion
-        base.update({name: Fusion(tuple(parts), default.rerank_k, default.rerank_alpha)
-                     for name, parts in self.extra_fusions.items()})
+        base.update({name: default.with_parts(parts) for name, parts in self.extra_fusions.items()})
         out = {}
         for name, f in base.items():
             missing = [p for p in f.parts if p not in self.methods]
             if missing:
                 raise ConfigError(f"fusion {name}: its parts {', '.join(missing)} are not in methods")
-            out[name] = Fusion(f.parts, self.rerank_k if self.rerank_k is not None else f.rerank_k,
-                               self.rerank_alpha if self.rerank_alpha is not None else f.rerank_alpha)
+            out[name] = replace(f, rerank_k=self.rerank_k if self.rerank_k is not None else f.rerank_k,
+                                rerank_alpha=self.rerank_alpha if self.rerank_alpha is not None else f.rerank_alpha)
         return out
 
 
@@ -126,7 +126,7 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
         if len(parts) > 1:
             variants.update({f"{name} without {p}": ([q for q in parts if q != p], fusion.rerank_k) for p in parts})
         for variant, (use, k) in variants.items():
-            D = fused_matrix([_restrict(matrices[p], kept) for p in use], Fusion(tuple(use), k, fusion.rerank_alpha))
+            D = fused_matrix([_restrict(matrices[p], kept) for p in use], fusion.with_parts(use, rerank_k=k))
             if variant == name:
                 matrices[name] = (kept, D)
             m = retrieval_metrics(D, y[kept]).micro
@@ -297,7 +297,30 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
     fig.legend(handles, names_, loc="upper center", ncol=len(methods), fontsize=7, frameon=False)
     fig.tight_layout(rect=(0, 0, 1, 0.92))
     out.figures[f"{params.name}_metrics"] = fig
+    note = small_collection_note(np.array([labels[str(Path(p).resolve())] for p in db_paths]))
+    if note:
+        out.notes.append(note)
     return out
+
+
+def small_collection_note(labels: np.ndarray, few: int = 10) -> str | None:
+    """A caution for the run page when the class metrics rest on fewer than ``few`` queries (None otherwise).
+
+    PSB metrics count a query only when its class has more than ``PSB_CUTOFF`` members, so on a small
+    collection they average over a handful of queries and one query moves them by 1 / that number.
+    """
+    from topomatch.stages.retrieval.metrics import PSB_CUTOFF
+
+    names, sizes = np.unique(labels, return_counts=True)
+    counted = {str(c): int(n) for c, n in zip(names, sizes) if n > PSB_CUTOFF}
+    q = sum(counted.values())
+    if q >= few:
+        return None
+    classes = ", ".join(f"{c} ({n})" for c, n in counted.items()) or "none"
+    return (f"Small collection: the class metrics (NN, tiers, E, DCG, mAP) average over only {q} queries, the "
+            f"members of the classes with more than {PSB_CUTOFF} shapes ({classes}); one query moves them by "
+            f"{1 / max(q, 1):.2f}, so no method can be told apart from another by them here. self@1 counts all "
+            f"{len(labels)} shapes and is the measure of this run.")
 
 
 def _point_name(point: dict) -> str:

@@ -101,9 +101,13 @@ def test_match_prints_correspondence(capsys):
     result = json.loads(out)
     assert code == 0 and result["endpoints_a"] >= 5 and result["endpoints_b"] >= 5
     assert len(result["correspondence"]) == min(result["endpoints_a"], result["endpoints_b"])
-    # the method's own unmatched cost (0.2 for rgpd) for each endpoint left without a partner
+    # the method's own unmatched cost (the catalogue's, 0.3 for rgpd) for each endpoint left without a partner
+    from topomatch.stages.retrieval.catalogue import get_method
+
     unmatched = abs(result["endpoints_a"] - result["endpoints_b"])
-    assert result["dissimilarity"] == pytest.approx(sum(p["cost"] for p in result["correspondence"]) + 0.2 * unmatched)
+    cost = get_method("rgpd").unmatched_cost
+    assert cost > 0 and result["dissimilarity"] == pytest.approx(sum(p["cost"] for p in result["correspondence"])
+                                                                 + cost * unmatched)
 
 
 def test_errors(tmp_path, capsys):
@@ -125,9 +129,37 @@ def test_fused_topomatch_method(collection, tmp_path, capsys):
     result = json.loads(out)
     assert code == 0 and result["results"][0]["path"].endswith("odedstein_hand_closed.obj.gz")
     assert result["results"][0]["dissimilarity"] == 0.0 and len(result["results"]) == 6
+    assert result["fusion"]["rerank_k"] == 3  # auto: round(sqrt(6 + 1) / 2), at least 3
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch", "--json", "--out", tmp_path / "D.npz")
     D = np.load(tmp_path / "D.npz")["D"]
     assert code == 0 and D.shape == (6, 6) and np.allclose(D, D.T) and np.allclose(np.diag(D), D.min(axis=1))
+    fusion = json.loads(out)["fusion"]  # what the screening did, with each part's agreement
+    assert sorted(fusion["kept"] + fusion["dropped"]) == sorted(("agd", "hks", "shapedna", "d2", "sh"))
+    assert max(fusion["agreement"].values()) <= 1 and fusion["rerank_k"] == 3
+    code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch-equal", "--out", tmp_path / "E.npz")
+    assert code == 0 and "fusion: kept agd, hks, shapedna, d2, sh; part agreement not screened" in out
     # a fusion needs an index: match explains and exits 2
     code, _, err = run(capsys, "match", collection / "torus.off", collection / "torus.off", "--method", "topomatch")
     assert code == 2 and "fused method" in err and "agd" in err
+
+
+def test_index_reports_open_and_multi_component_meshes(tmp_path, capsys):
+    import igl
+    from shapes import disjoint_union, icosphere
+
+    def write(name, V, F):
+        igl.write_triangle_mesh(str(folder / name), np.asarray(V, float), np.asarray(F, np.int64))
+
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    sphere = icosphere(3)
+    write("closed.off", sphere.V, sphere.F)
+    used = sphere.F[sphere.V[sphere.F].mean(axis=1)[:, 2] < 0.8]  # a sphere with a hole at the top
+    kept = np.unique(used)
+    write("open.off", sphere.V[kept], np.searchsorted(kept, used))
+    two = disjoint_union(sphere, icosphere(2))
+    write("two.off", two.V, two.F)
+    code, out, _ = run(capsys, "index", folder, "--db", tmp_path / "i.db", "--method", "shapedna", "--no-progress")
+    assert code == 0 and "3 indexed, 0 failed" in out
+    assert "1 meshes are open (have boundaries)" in out and "Neumann" in out
+    assert "1 meshes have several components: the largest was indexed" in out

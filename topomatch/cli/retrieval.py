@@ -150,6 +150,11 @@ def cmd_index(args: argparse.Namespace) -> int:
         print(f"{report.db}: {part.done} indexed, {part.failed} failed, {report.n_files - part.todo} unchanged "
               f"(skipped){before} [{part.method}, {part.seconds:.1f} s of worker time]")
     print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
+    if report.open_meshes:
+        print(f"{len(report.open_meshes)} meshes are open (have boundaries): the spectrum, heat kernel and skeleton "
+              f"use natural (Neumann) boundary conditions")
+    if report.multi_component_meshes:
+        print(f"{len(report.multi_component_meshes)} meshes have several components: the largest was indexed")
     for part in report.parts:
         for reason in part.failures:
             print(f"  failed ({part.method}): {reason}", file=sys.stderr)
@@ -170,6 +175,8 @@ def cmd_query(args: argparse.Namespace) -> int:
         print(f"query {args.mesh} ({args.method}, {endpoints} endpoints) against {result.indexed} shapes:")
         for r in result.results:
             print(f"  {r['rank']:>3}. {r['dissimilarity']:.5f}  {r['label'] or '':<12} {r['path']}")
+        if result.fusion is not None:
+            print(fusion_line(result.fusion))
     return 0
 
 
@@ -182,4 +189,14 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     else:
         print(ev.metrics.table(args.method))
         print(f"{ev.n} shapes; matrix ({ev.matrix_seconds:.2f} s) written to {ev.matrix}")
+        if ev.fusion is not None:
+            print(fusion_line(ev.fusion))
     return 0
+
+
+def fusion_line(decision: dict) -> str:
+    """One line saying what a fusion did (FusionDecision.to_dict())."""
+    agreement = ", ".join(f"{p} {a:.2f}" for p, a in decision["agreement"].items()) or "not screened"
+    dropped = f"; dropped {', '.join(decision['dropped'])} (agreement below half the best)" if decision["dropped"] else ""
+    k = decision["rerank_k"] if decision["rerank_k"] is not None else "none"
+    return f"fusion: kept {', '.join(decision['kept'])}{dropped}; part agreement {agreement}; re-ranking k = {k}"

@@ -79,3 +79,19 @@ def test_every_record_is_complete():
     assert catalogue.DEFAULT_METHOD in METHODS and METHODS[catalogue.DEFAULT_PAIR_METHOD].kind != "fusion"
     with pytest.raises(topomatch.ConfigError, match="unknown retrieval method 'nope'; methods: rgpd"):
         catalogue.get_method("nope")
+
+
+@pytest.mark.parametrize("name", ["rgpd", "srg", "agd"])
+def test_a_shape_without_endpoints_is_not_at_distance_zero_from_everything(name):
+    """The thesis methods' default unmatched cost is positive: a skeleton with no endpoints is as far
+    from one with n endpoints as n unmatched endpoints cost (and at 0 only from another such shape)."""
+    from topomatch.stages.retrieval.ranking import dissimilarities
+
+    method = METHODS[name]
+    width = 3 if method.name != "agd" else 3 + 8
+    rng = np.random.default_rng(0)
+    none = Descriptor("endpoints", np.zeros((0, width)), 0)
+    others = [Descriptor("endpoints", rng.random((n, width)), n) for n in (2, 5, 9)]
+    d = dissimilarities(none, others + [none], method)
+    assert method.unmatched_cost > 0
+    np.testing.assert_allclose(d, [2 * method.unmatched_cost, 5 * method.unmatched_cost, 9 * method.unmatched_cost, 0])

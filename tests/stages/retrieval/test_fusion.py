@@ -67,3 +67,74 @@ def test_one_row_ranks_as_the_full_ranking():
         r = manifold_ranking_row(D, i, k=6, alpha=0.9)
         np.testing.assert_array_equal(np.argsort(r, kind="stable")[:20], np.argsort(R[i], kind="stable")[:20])
         assert r[i] == pytest.approx(0.0)
+
+
+def _scrambled(D, seed):
+    """The same dissimilarities attached to the wrong shapes: no class information, same distribution."""
+    perm = np.random.default_rng(seed).permutation(len(D))
+    return D[np.ix_(perm, perm)]
+
+
+def _clusters(n_classes=6, per=8, seed=0):
+    rng = np.random.default_rng(seed)
+    centres = rng.normal(size=(n_classes, 4)) * 3
+    X = np.repeat(centres, per, axis=0) + rng.normal(size=(n_classes * per, 4))
+    return X, np.repeat(np.arange(n_classes), per)
+
+
+def test_agreement_is_one_for_copies_and_near_chance_for_a_scrambled_part():
+    from topomatch.stages.retrieval.fusion import agreement
+
+    X, _ = _clusters()
+    D = cdist(X, X)
+    np.testing.assert_allclose(agreement([D, 2 * D, D ** 2]), 1.0)
+    a = agreement([D, cdist(X, X, "cityblock"), _scrambled(D, 1)])
+    chance = 5 / (len(D) - 1)
+    assert a[0] > 0.5 and a[1] > 0.5 and a[2] < 3 * chance
+
+
+def test_screening_drops_parts_without_class_information_and_keeps_the_ranking():
+    from topomatch.stages.retrieval.fusion import decide
+
+    X, y = _clusters()
+    good = [cdist(X, X), cdist(X, X, "cityblock")]
+    junk = [_scrambled(good[0], 1), _scrambled(good[1], 2)]
+    fusion = Fusion(("a", "b", "c", "d"), None, 0.9, order_weights=(1, 1, 0.5, 0.25), screen=0.5)
+    decision = decide(good + junk, fusion)
+    assert decision.kept == ("a", "b") and decision.dropped == ("c", "d")
+    screened = fused_matrix(good + junk, fusion)
+    np.testing.assert_allclose(screened, fused_matrix(good, fusion.with_parts(("a", "b"))))
+    unscreened = fused_matrix(good + junk, Fusion(("a", "b", "c", "d"), None, 0.9))
+    assert first_tier(screened, y) > first_tier(unscreened, y)
+    # every part is kept when all of them see the classes
+    assert decide(good + [cdist(X, X, "chebyshev")], fusion.with_parts("abc")).dropped == ()
+
+
+def test_order_weights_give_the_minimum_the_mean_and_ignore_the_order_of_parts():
+    A = np.array([[0, 1, 4], [1, 0, 2], [4, 2, 0]], float)
+    B = np.array([[0, 3, 1], [3, 0, 5], [1, 5, 0]], float)
+    np.testing.assert_allclose(fuse([A, B], [1, 1], (1, 0)), np.minimum(A, B))
+    np.testing.assert_allclose(fuse([A, B], [1, 1], (1, 1)), (A + B) / 2)
+    np.testing.assert_allclose(fuse([A, B], [1, 1], (3, 1)), fuse([B, A], [1, 1], (3, 1)))
+    np.testing.assert_allclose(fuse([A, B], [1, 1], (1, 1, 1)), (A + B) / 2)  # truncated to the parts
+
+
+def test_automatic_rerank_neighbours_follow_the_collection_size():
+    from topomatch.stages.retrieval.fusion import rerank_neighbours
+
+    auto = Fusion(("a",), "auto", 0.9)
+    assert [rerank_neighbours(auto, n) for n in (4, 100, 400, 10_000)] == [3, 5, 10, 50]
+    assert rerank_neighbours(Fusion(("a",), 7, 0.9), 400) == 7 and rerank_neighbours(Fusion(("a",), None, 0.9), 9) is None
+
+
+def test_adaptive_query_of_a_duplicate_ranks_it_first_and_agrees_with_the_collection_ranking():
+    X, _ = _clusters(seed=3)
+    parts = [cdist(X, X), cdist(X, X, "cityblock"), _scrambled(cdist(X, X), 4)]
+    fusion = Fusion(("a", "b", "c"), "auto", 0.9, order_weights=(1, 1, 0.5), screen=0.5)
+    i = 11
+    rows = [P[i] for P in parts]
+    d = fused_query(rows, parts, fusion)
+    assert np.argmin(d) == i and d[i] == 0.0
+    R = fused_matrix(parts, fusion)
+    top = lambda r: set(np.argsort(r, kind="stable")[:6])  # noqa: E731
+    assert len(top(d) & top(R[i])) >= 5
