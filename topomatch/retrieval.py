@@ -265,10 +265,23 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
             if report.failed:
                 report.failures = [row.reason or "" for row in store.rows(report.method, report.params_hash,
                                                                           status="failed")]
+    if get_method(method).fusion is not None:
+        _update_shortlist(db_path, method, set(todo))
     cleans = {path: c for path, c in shapes.items() if c is not None}
     return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0,
                        sorted(p for p, c in cleans.items() if c.after.n_boundary_loops > 0),
                        sorted(p for p, c in cleans.items() if c.dropped_components > 0))
+
+
+def _update_shortlist(db: Path, method: str, indexed: set[str]) -> None:
+    """Keep a large index's shortlist graph (``<db>.ann``) in step with its rows (none for small ones);
+    ``indexed``: the meshes (re)computed by this run."""
+    from topomatch.stages.retrieval.shortlist import LARGE_INDEX
+
+    collection = Collection(db)
+    counts = {name: n for name, _, n in collection.methods()}
+    if min(counts.get(p, 0) for p in get_method(method).parts) >= LARGE_INDEX:
+        collection.shortlist(method, refresh=indexed)
 
 
 def _first_clean(result: ItemResult) -> Any:
@@ -379,10 +392,16 @@ class Collection:
         return _combined(get_method(method), self.part_matrices(method, descriptors, options))
 
     def query(self, mesh: str | Path, *, k: int = 10, method: str = DEFAULT_METHOD,
-              options: dict[str, Any] | None = None) -> QueryResult:
-        """The ``k`` closest indexed shapes to a mesh file (its descriptors go through the index's cache)."""
+              options: dict[str, Any] | None = None, shortlist: bool | None = None) -> QueryResult:
+        """The ``k`` closest indexed shapes to a mesh file (its descriptors go through the index's cache).
+
+        ``shortlist`` (fusions): rank through the approximate-nearest-neighbour shortlist
+        (:mod:`topomatch.stages.retrieval.shortlist`); None = when the index holds at least
+        ``LARGE_INDEX`` shapes.
+        """
         from topomatch.stages.retrieval.fusion import fused_query
         from topomatch.stages.retrieval.ranking import dissimilarities
+        from topomatch.stages.retrieval.shortlist import LARGE_INDEX
 
         if not (isinstance(k, int) and k >= 1):
             raise ConfigError(f"k must be a whole number of at least 1, got {k!r}")
@@ -392,13 +411,16 @@ class Collection:
         query = {p: compute_descriptor(mesh, p, cache_dir(self.db))[0] for p in m.parts}
         t_desc = time.perf_counter() - t
         t = time.perf_counter()
-        rows_d = [dissimilarities(query[p], descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
+        large = m.fusion is not None and (shortlist if shortlist is not None else len(rows) >= LARGE_INDEX)
         decision = None
-        if m.fusion is not None:
+        if large:
+            d, decision = self._shortlisted(m, rows, descriptors, query, k, options)
+        elif m.fusion is not None:
+            rows_d = [dissimilarities(query[p], descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
             mats = self.part_matrices(method, descriptors, options)
             d, decision = fused_query(rows_d, mats, m.fusion), _decision(m, mats)
         else:
-            d = rows_d[0]
+            d = dissimilarities(query[m.name], descriptors[m.name], m.name, self._part_options(m.name, m, options))
         order = np.argsort(d, kind="stable")[:k]
         t_rank = time.perf_counter() - t
         endpoints = next((q.n_endpoints for q in query.values() if q.n_endpoints is not None), None)
@@ -406,6 +428,60 @@ class Collection:
                     "endpoints": rows[j].n_endpoints} for i, j in enumerate(order) if np.isfinite(d[j])]
         return QueryResult(str(mesh), method, endpoints, len(rows), {"descriptor": t_desc, "ranking": t_rank},
                            results, decision)
+
+    def shortlist(self, method: str = DEFAULT_METHOD, options: dict[str, Any] | None = None,
+                  refresh: set[str] | frozenset[str] = frozenset()):
+        """The approximate-nearest-neighbour shortlist of a fused method, loaded from ``<db>.ann``,
+        brought up to date (new shapes added, the ``refresh`` paths re-embedded) or built, and saved."""
+        from topomatch.stages.retrieval.shortlist import sample_fusion
+
+        m = get_method(method)
+        rows, descriptors = self.parts(method)
+        scales, decision = sample_fusion(descriptors, m.fusion, lambda p: self._part_options(p, m, options))
+        return self._shortlist(rows, descriptors, scales, decision, refresh)[0]
+
+    def _shortlist(self, rows: list[Row], descriptors: dict[str, list[Descriptor]], scales: dict[str, float],
+                   decision: Any, refresh: set[str] | frozenset[str] = frozenset()):
+        """(the shortlist of ``rows``, loaded and brought up to date or built, then saved; (n,) their keys)."""
+        from topomatch.stages.retrieval.shortlist import Shortlist, shape_key, vector_parts
+
+        parts = vector_parts(decision)
+        if not parts:
+            raise ConfigError(f"{self.db}: the shortlist needs a vector part, and the screening kept only "
+                              f"{', '.join(decision.kept)}")
+        keys = np.array([shape_key(r.path) for r in rows], dtype=np.uint64)
+
+        def vectors(idx):
+            return {p: np.stack([descriptors[p][i].data.ravel() for i in idx]) for p in parts}
+
+        path = self.db.with_name(self.db.name + ".ann")
+        ann = Shortlist.load(path)
+        if ann is None or ann.parts != parts or any(abs(ann.scales[p] / scales[p] - 1) > 0.2 for p in parts):
+            ann, changed = Shortlist.build(keys, vectors(range(len(rows))), {p: scales[p] for p in parts}), True
+        else:
+            stale = np.array([r.path in refresh for r in rows], dtype=bool)
+            todo = np.flatnonzero(~np.asarray(ann.index.contains(keys), dtype=bool) | stale)
+            changed = len(todo) > 0
+            if changed:
+                ann.add(keys[todo], vectors(todo))
+        if changed:
+            try:
+                ann.save(path)
+            except OSError:  # a read-only index still answers, from the graph in memory
+                pass
+        return ann, keys
+
+    def _shortlisted(self, m: Method, rows: list[Row], descriptors: dict[str, list[Descriptor]],
+                     query: dict[str, Descriptor], k: int, options: dict[str, Any] | None):
+        """(n,) dissimilarities of a query, exact on its shortlist and inf elsewhere, and the fusion decision."""
+        from topomatch.stages.retrieval.shortlist import SHORTLIST, sample_fusion, shortlisted_dissimilarities
+
+        part_options = lambda p: self._part_options(p, m, options)  # noqa: E731
+        scales, decision = sample_fusion(descriptors, m.fusion, part_options)
+        ann, keys = self._shortlist(rows, descriptors, scales, decision)
+        count = max(SHORTLIST, 20 * k)
+        d = shortlisted_dissimilarities(query, descriptors, m.fusion, ann, keys, scales, decision, part_options, count)
+        return d, {**decision.to_dict(), "rerank_k": None, "shortlist": min(count, len(rows))}
 
     def evaluate(self, *, method: str = DEFAULT_METHOD, options: dict[str, Any] | None = None,
                  out: str | Path | None = None) -> Evaluation:

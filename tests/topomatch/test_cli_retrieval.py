@@ -163,3 +163,27 @@ def test_index_reports_open_and_multi_component_meshes(tmp_path, capsys):
     assert code == 0 and "3 indexed, 0 failed" in out
     assert "1 meshes are open (have boundaries)" in out and "Neumann" in out
     assert "1 meshes have several components: the largest was indexed" in out
+
+
+def test_shortlisted_query_ranks_as_the_exact_fusion_without_re_ranking(collection, tmp_path, capsys):
+    """With the shortlist longer than the index, the shortlisted query is the exact fused ranking
+    (scales and screening from the whole index, no manifold ranking)."""
+    from dataclasses import replace
+
+    from topomatch.retrieval import open_index
+    from topomatch.stages.retrieval.catalogue import get_method
+    from topomatch.stages.retrieval.fusion import fused_query
+
+    db = tmp_path / "index.db"
+    assert run(capsys, "index", collection, "--db", db, "--workers", "1", "--no-progress")[0] == 0
+    index = open_index(db)
+    query = collection / "odedstein_human_woman.obj.gz"
+    result = index.query(query, k=6, shortlist=True)
+    assert result.fusion["shortlist"] == 6 and result.fusion["rerank_k"] is None
+    assert (tmp_path / "index.db.ann").is_file() and (tmp_path / "index.db.ann.json").is_file()
+    rows, descriptors = index.parts("topomatch")
+    mats = index.part_matrices("topomatch", descriptors)
+    i = next(j for j, r in enumerate(rows) if r.path.endswith("odedstein_human_woman.obj.gz"))
+    exact = fused_query([M[i] for M in mats], mats, replace(get_method("topomatch").fusion, rerank_k=None))
+    assert [r["path"] for r in result.results] == [rows[j].path for j in np.argsort(exact, kind="stable")]
+    assert len(index.shortlist()) == 6

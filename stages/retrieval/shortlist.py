@@ -1,0 +1,169 @@
+"""Approximate-nearest-neighbour shortlist for large indexes, then the exact fused ranking on it.
+
+A fused query against n shapes needs every part's dissimilarities to all n shapes, and the
+database's (n, n) part matrices for the scales, the screening and the re-ranking: fine for
+thousands of shapes, impossible for 100,000. For a large index:
+
+1. **Scales and screening from a sample**: each part's median dissimilarity and the parts'
+   neighbour agreement (:func:`topomatch.stages.retrieval.fusion.decide`) are computed on a fixed,
+   seeded sample of ``SAMPLE`` database shapes (:func:`sample_rows`), once per index.
+2. **Shortlist**: the kept vector parts (hks, shapedna, d2, sh), each divided by its scale and
+   concatenated (:func:`embedding`, float32), go into an HNSW graph (usearch; Malkov and
+   Yashunin, IEEE TPAMI 2020) with squared-Euclidean distance; a query takes its ``count``
+   approximate nearest neighbours there.
+3. **Exact ranking on the shortlist**: every kept part (the skeleton's endpoint matching too)
+   compares the query with the shortlisted shapes only, and the parts are fused exactly as the
+   method fuses them (scales, order weights), without manifold ranking (which needs the whole
+   collection's graph).
+
+The shortlist misses a shape only if the vector parts' concatenation ranks it beyond ``count``;
+``benchmarks/retrieval_large.py`` measures recall@10 against the exact fused ranking over the
+whole index. The graph is persisted beside the SQLite index (``<db>.ann`` + ``<db>.ann.json``) and
+updated incrementally by ``topomatch index``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+#: Database shapes whose part matrices give the scales and the screening of a large index.
+SAMPLE = 1000
+
+#: Indexes with at least this many shapes rank a fused query through the shortlist.
+LARGE_INDEX = 5000
+
+#: Shortlist length per query (at least 20 times the results asked for).
+SHORTLIST = 300
+
+
+def shape_key(path: str) -> int:
+    """A stable 63-bit key of a shape's path (the graph's label of that shape)."""
+    return int.from_bytes(hashlib.sha1(path.encode()).digest()[:8], "little") >> 1
+
+
+def sample_rows(n: int, size: int = SAMPLE, seed: int = 0) -> np.ndarray:
+    """(min(n, size),) sorted row indices of a fixed, seeded sample of a database of ``n`` shapes."""
+    if n <= size:
+        return np.arange(n)
+    return np.sort(np.random.default_rng(seed).choice(n, size, replace=False))
+
+
+def embedding(vectors: dict[str, np.ndarray], scales: dict[str, float]) -> np.ndarray:
+    """(n, D) float32: the vector parts' descriptors (n, d_p), each divided by its scale, side by side."""
+    return np.hstack([np.asarray(vectors[p], dtype=np.float64) / scales[p] for p in sorted(vectors)]).astype(np.float32)
+
+
+@dataclass
+class Shortlist:
+    """An HNSW graph over the embeddings of an index's shapes, keyed by :func:`shape_key`.
+
+    Attributes
+    ----------
+    parts : tuple of str
+        The vector parts embedded (sorted).
+    scales : dict
+        Their scales (median dissimilarity over the sample).
+    index : usearch.index.Index
+        The graph (``len(index)`` shapes).
+    """
+
+    parts: tuple[str, ...]
+    scales: dict[str, float]
+    index: object
+
+    @classmethod
+    def build(cls, keys: np.ndarray, vectors: dict[str, np.ndarray], scales: dict[str, float]) -> "Shortlist":
+        from usearch.index import Index
+
+        X = embedding(vectors, scales)
+        index = Index(ndim=X.shape[1], metric="l2sq", dtype="f32")
+        if len(X):
+            index.add(np.asarray(keys, dtype=np.uint64), X)
+        return cls(tuple(sorted(vectors)), {p: float(scales[p]) for p in sorted(vectors)}, index)
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+    def add(self, keys: np.ndarray, vectors: dict[str, np.ndarray]) -> None:
+        """Add (or replace) shapes."""
+        keys = np.asarray(keys, dtype=np.uint64)
+        present = [k for k in keys.tolist() if k in self.index]
+        if present:
+            self.index.remove(present)
+        if len(keys):
+            self.index.add(keys, embedding(vectors, self.scales))
+
+    def search(self, vectors: dict[str, np.ndarray], count: int) -> np.ndarray:
+        """Keys of the ``count`` nearest shapes to one query (``vectors``: part -> (d,) descriptor)."""
+        q = embedding({p: np.asarray(v)[None] for p, v in vectors.items()}, self.scales)[0]
+        matches = self.index.search(q, min(count, len(self.index)))
+        return np.asarray(matches.keys, dtype=np.uint64)
+
+    def save(self, path: Path) -> None:
+        """Write the graph to ``path`` and its parts and scales to ``path.json``."""
+        self.index.save(str(path))
+        Path(f"{path}.json").write_text(json.dumps({"schema": 1, "parts": list(self.parts), "scales": self.scales}))
+
+    @classmethod
+    def load(cls, path: Path) -> "Shortlist | None":
+        """The shortlist saved at ``path``, or None when there is none (or it is unreadable)."""
+        from usearch.index import Index
+
+        meta = Path(f"{path}.json")
+        if not (Path(path).is_file() and meta.is_file()):
+            return None
+        try:
+            info = json.loads(meta.read_text())
+            index = Index.restore(str(path))
+        except (OSError, ValueError, RuntimeError):
+            return None
+        if index is None or info.get("schema") != 1:
+            return None
+        return cls(tuple(info["parts"]), {p: float(s) for p, s in info["scales"].items()}, index)
+
+
+def sample_fusion(descriptors: dict, fusion, options) -> tuple[dict[str, float], object]:
+    """A large database's part scales and screening decision, from :func:`sample_rows` of it.
+
+    ``descriptors``: part -> list of n :class:`Descriptor`; ``options``: part -> its MatchOptions.
+    Returns ({part: median dissimilarity}, :class:`~topomatch.stages.retrieval.fusion.FusionDecision`).
+    """
+    from dataclasses import replace
+
+    from topomatch.stages.retrieval.fusion import decide, median_scale
+    from topomatch.stages.retrieval.ranking import dissimilarity_matrix
+
+    sample = sample_rows(len(next(iter(descriptors.values()))))
+    mats = [dissimilarity_matrix([descriptors[p][i] for i in sample], p, options(p)) for p in fusion.parts]
+    return ({p: median_scale(M) for p, M in zip(fusion.parts, mats)},
+            decide(mats, replace(fusion, rerank_k=None)))
+
+
+def vector_parts(decision) -> tuple[str, ...]:
+    """The kept parts a shortlist embeds: the vector ones (sorted)."""
+    from topomatch.stages.retrieval.catalogue import get_method
+
+    return tuple(sorted(p for p in decision.kept if get_method(p).kind == "vector"))
+
+
+def shortlisted_dissimilarities(query: dict, descriptors: dict, fusion, ann: Shortlist, keys: np.ndarray,
+                                scales: dict[str, float], decision, options, count: int) -> np.ndarray:
+    """(n,) fused dissimilarities of one query: exact on its ``count`` shortlisted shapes, inf elsewhere.
+
+    ``query``: part -> the query's Descriptor; ``keys``: (n,) the database shapes' graph keys.
+    """
+    from topomatch.stages.retrieval.fusion import fuse
+    from topomatch.stages.retrieval.ranking import dissimilarities
+
+    position = {int(key): i for i, key in enumerate(keys.tolist())}
+    found = ann.search({p: query[p].data.ravel() for p in ann.parts}, count)
+    cand = np.array([position[int(key)] for key in found.tolist() if int(key) in position], dtype=np.int64)
+    rows = [dissimilarities(query[p], [descriptors[p][i] for i in cand], p, options(p)) for p in decision.kept]
+    d = np.full(len(keys), np.inf)
+    d[cand] = fuse(rows, [scales[p] for p in decision.kept], fusion.order_weights)
+    return d
