@@ -290,6 +290,7 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
             ax.bar(np.arange(len(names)) + k * width, values, width, label=method)
         ax.set_xticks(np.arange(len(names)) + 0.4 - width / 2, names, rotation=20, ha="right", fontsize=7)
         ax.set_ylim(0, 1.05)
+        ax.set_ylabel({"map": "mean average precision", "self@1": "fraction of queries"}[metric], fontsize=8)
         ax.set_title({"map": "mAP, perturbed query vs clean index (own original removed)",
                       "self@1": "own clean original ranked first"}[metric], fontsize=8)
         ax.grid(axis="y", alpha=0.3)
