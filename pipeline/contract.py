@@ -79,11 +79,15 @@ def stage(name: str, *, params: type[Params], version: int, consumes: tuple[str,
 
 @dataclass
 class ReportOutput:
-    """Tables (name -> rows) and figures (name -> matplotlib Figure) of one report, and notes."""
+    """Tables (name -> rows) and figures (name -> matplotlib Figure) of one report, notes, files
+    (path relative to the run folder -> bytes, e.g. exported meshes) and HTML fragments for the
+    run page (self-contained: an interactive view, whose scripts the page loads from ``assets``)."""
 
     tables: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     figures: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    files: dict[str, bytes] = field(default_factory=dict)
+    html: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)

@@ -169,3 +169,69 @@ def skeleton_stability_report(experiment, results, params: StabilityParams) -> R
     axes[1].legend(fontsize=7)
     fig.tight_layout()
     return ReportOutput(tables={params.name: rows}, figures={params.name: fig})
+
+
+# --------------------------------------------------------------------------- exports for other tools
+
+
+class ExportParams(Params):
+    folder: str = Field("exports", pattern=r"^[A-Za-z0-9_.-]+$", description="folder of the run to write into")
+    meshes: list[str] = Field(default_factory=lambda: ["final"], description=(
+        "meshes to write: 'final' (the last mesh of the chain) and/or labels of stages that produce a mesh "
+        "(clean, decimate, noise, ...); [] writes none"))
+    mesh_format: Literal["ply", "obj", "off"] = Field("ply", description="mesh file format")
+    graphs: list[Literal["skeleton", "reeb"]] = Field(default_factory=lambda: ["skeleton"], description=(
+        "graphs to write: the pruned skeleton and/or the unpruned Reeb graph"))
+    graph_formats: list[Literal["ply", "obj", "graphml", "json"]] = Field(
+        default_factory=lambda: ["ply"], min_length=1, description="graph file formats (PLY polyline first)")
+    where: dict[str, float | int | str | bool] = Field(default_factory=dict,
+                                                       description="only items with these sweep values")
+
+
+def item_file_stem(r) -> str:
+    """A file-name stem unique to an item: the input's stem and its sweep values."""
+    stem = Path(r.input_path).name.split(".")[0]
+    sweep = "_".join(f"{k.split('.')[-1]}-{v}" for k, v in r.sweep.items())
+    return "".join(c if c.isalnum() or c in "._-" else "-" for c in (f"{stem}_{sweep}" if sweep else stem))
+
+
+@report("export", params=ExportParams)
+def export_report(experiment, results, params: ExportParams) -> ReportOutput:
+    """Write each item's meshes (final, cleaned, decimated, ...) and skeletons as files other tools open
+    (PLY / OBJ / OFF meshes; PLY or OBJ polylines, GraphML, JSON graphs) into ``exports/``."""
+    from topomatch.pipeline.contract import ConfigError
+    from topomatch.stages.mesh.export import mesh_text
+    from topomatch.stages.reeb.export import skeleton_text
+
+    files: dict[str, bytes] = {}
+    rows = []
+    for r in results:
+        if not r.ok or any(r.sweep.get(k) != v for k, v in params.where.items()):
+            continue
+        stem = item_file_stem(r)
+        for which in params.meshes:
+            if which == "final":
+                mesh = r.final("mesh")
+            elif which in r.results:
+                if "mesh" not in r.stage_produces.get(which, ()):
+                    raise ConfigError(f"export: stage {which!r} produces no mesh; choose among "
+                                      f"{[k for k, v in r.stage_produces.items() if 'mesh' in v]}")
+                mesh = r.results[which].mesh
+            else:
+                raise ConfigError(f"export: no stage {which!r} in the chain (stages: {list(r.results)})")
+            if mesh is None:
+                continue
+            path = f"{params.folder}/{stem}/mesh_{which}.{params.mesh_format}"
+            files[path] = mesh_text(mesh.V, mesh.F, params.mesh_format).encode()
+            rows.append({"item": r.item_id, "what": f"mesh ({which})", "file": path,
+                         "vertices": mesh.n_vertices, "faces": mesh.n_faces, "edges": ""})
+        for kind in params.graphs:
+            value = r.final("skeleton") if kind == "skeleton" else r.final("reeb")
+            if value is None:
+                continue
+            for fmt in params.graph_formats:
+                path = f"{params.folder}/{stem}/{kind}.{fmt}"
+                files[path] = skeleton_text(value.graph, fmt).encode()
+                rows.append({"item": r.item_id, "what": kind, "file": path, "vertices": value.graph.number_of_nodes(),
+                             "faces": "", "edges": value.graph.number_of_edges()})
+    return ReportOutput(tables={params.folder: rows}, files=files)
