@@ -9,9 +9,8 @@ figure.
 from __future__ import annotations
 
 import argparse
-import sys
 
-from topomatch.cli.common import command, path_argument, print_result
+from topomatch.cli.common import command, path_argument, print_result, warn
 from topomatch.pipeline.cli_options import add_options, given_options
 
 
@@ -65,5 +64,5 @@ def cmd_skeleton(args: argparse.Namespace) -> int:
         summary["files"] = write_skeleton_files(result, args.out, args.formats)
     print_result(summary, as_json=args.json)
     for warning in result.warnings:
-        print(f"topomatch: warning: {args.mesh}: {warning}", file=sys.stderr)
+        warn(f"{args.mesh}: {warning}")
     return 0
