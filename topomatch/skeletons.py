@@ -175,12 +175,14 @@ def skeleton_png(result: Skeleton, *, dpi: int = 150) -> bytes:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from topomatch.stages.reeb.reports import SkeletonGalleryParams, draw_item
+    from topomatch.stages.reeb.reports import FUNCTION_NAMES, SkeletonGalleryParams, add_skeleton_keys, draw_item
 
-    fig = plt.figure(figsize=(6, 6))
-    ax = fig.add_subplot(projection="3d")
+    fig = plt.figure(figsize=(6, 6.8))
+    ax = fig.add_axes([0.02, 0.16, 0.96, 0.76])
     caption = draw_item(ax, result.item, SkeletonGalleryParams())
-    ax.set_title(f"{Path(result.mesh).name} ({result.function}, N={result.levels})\n{caption}", fontsize=9)
+    name = FUNCTION_NAMES.get(result.function, result.function)
+    ax.set_title(f"Skeleton of {Path(result.mesh).name} ({name}, {result.levels} levels)\n{caption}", fontsize=9)
+    add_skeleton_keys(fig, isolines=True, functions={result.function}, root="root" in result.graph)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
     plt.close(fig)

@@ -9,7 +9,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.contract import Params, ReportOutput, gallery_layout, report
+from topomatch.pipeline.contract import Params, ReportOutput, axis_label, gallery_layout, report
 
 
 class SkeletonGalleryParams(Params):
@@ -26,45 +26,72 @@ class SkeletonGalleryParams(Params):
     panel_size: float = Field(3.2, gt=0)
 
 
+#: Names of the Morse functions for colour bars and captions.
+FUNCTION_NAMES = {"mixture": "mixture distance", "euclidean": "Euclidean distance to the centroid",
+                  "affine": "affine distance", "fiedler": "Fiedler vector", "height": "height",
+                  "geodesic": "geodesic distance", "agd": "average geodesic distance"}
+
+
 def draw_item(ax, r, params: SkeletonGalleryParams) -> str:
-    """Draw one item's mesh, function, iso-curves and graph; return a caption."""
-    from topomatch.stages.mesh.render import UP_ORDER, draw_mesh, z_up
-    from topomatch.stages.reeb.render import draw_skeleton
+    """Draw one item's mesh coloured by its Morse function, iso-curves and graph, depth-sorted
+    (:func:`topomatch.stages.reeb.render.draw_scene`) on a 2D axis; return a caption."""
+    from topomatch.stages.mesh.render import UP_ORDER
+    from topomatch.stages.reeb.prune import endpoints
+    from topomatch.stages.reeb.render import draw_scene
 
     mesh, function = r.final("mesh"), r.final("function")
     level_sets, reeb, skeleton = r.final("level_sets"), r.final("reeb"), r.final("skeleton")
     order = list(UP_ORDER[params.up])
-    ax.computed_zorder = False
-    draw_mesh(ax, z_up(mesh, params.up), values=None if function is None else function.values,
-              cmap="coolwarm", elev=params.elev, azim=params.azim, alpha=params.alpha)
-    if params.isolines and level_sets is not None:
-        from mpl_toolkits.mplot3d.art3d import Line3DCollection
-
-        seg = level_sets.curves.segments[:, :, order]
-        ax.add_collection3d(Line3DCollection(seg, colors="0.25", linewidths=0.4, alpha=0.6))
-    caption = ""
+    graph, ends, caption = None, (), ""
     if params.graph == "skeleton" and skeleton is not None:
-        draw_skeleton(ax, skeleton.graph, endpoints=skeleton.endpoints, up_order=order)
-        caption = f"{len(skeleton.endpoints)} endpoints, cycles {skeleton.cycle_rank}"
+        graph, ends = skeleton.graph, skeleton.endpoints
+        caption = f"{len(ends)} endpoints, {skeleton.cycle_rank} cycle{'s' * (skeleton.cycle_rank != 1)}"
     elif reeb is not None:
-        from topomatch.stages.reeb.prune import endpoints
+        graph = reeb.graph
+        ends = endpoints(graph)
+        caption = f"{reeb.n_nodes} nodes, {len(ends)} endpoints, {reeb.cycle_rank} cycle{'s' * (reeb.cycle_rank != 1)}"
+    if graph is not None:
+        import networkx as nx
 
-        ends = endpoints(reeb.graph)
-        draw_skeleton(ax, reeb.graph, endpoints=ends, up_order=order)
-        caption = f"{reeb.n_nodes} nodes, {len(ends)} endpoints, cycles {reeb.cycle_rank}"
+        graph = nx.relabel_nodes(graph, lambda n: n, copy=True)
+        for n in graph.nodes:
+            graph.nodes[n]["pos"] = np.asarray(graph.nodes[n]["pos"], float)[order]
+    iso = level_sets.curves.segments[:, :, order] if (params.isolines and level_sets is not None) else None
+    draw_scene(ax, mesh.V[:, order], mesh.F, values=None if function is None else function.values, cmap="coolwarm",
+               isolines=iso, graph=graph, endpoints=ends, elev=params.elev, azim=params.azim, alpha=params.alpha)
     return caption
+
+
+def add_skeleton_keys(fig, *, isolines: bool, functions: set[str], root: bool) -> None:
+    """A colour bar of the Morse function (each shape's own range, minimum to maximum) and a legend of
+    the skeleton's marks, along the bottom of ``fig``."""
+    import matplotlib as mpl
+
+    from topomatch.stages.reeb.render import skeleton_legend_handles
+
+    names = ", ".join(sorted(FUNCTION_NAMES.get(f, f) for f in functions)) or "Morse function"
+    cax = fig.add_axes([0.05, 0.045, 0.36, 0.016])
+    bar = fig.colorbar(mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(0, 1), cmap="coolwarm"), cax=cax,
+                       orientation="horizontal", ticks=[0, 0.5, 1])
+    bar.ax.set_xticklabels(["min", "", "max"], fontsize=7)
+    bar.set_label(f"Morse function ({names}), each shape from its minimum to its maximum", fontsize=7)
+    fig.legend(handles=skeleton_legend_handles(isolines=isolines, root=root), loc="lower left",
+               bbox_to_anchor=(0.47, 0.0), ncol=2, fontsize=7, frameon=False)
 
 
 @report("skeleton_gallery", params=SkeletonGalleryParams)
 def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) -> ReportOutput:
-    """Each item's mesh shaded by its Morse function, with iso-curves, skeleton and endpoints."""
+    """Each item's mesh shaded by its Morse function (colour bar), with iso-curves, skeleton, endpoints
+    (red) and root (gold star), drawn depth-sorted."""
     import matplotlib.pyplot as plt
 
     results = [r for r in results if all(r.sweep.get(k) == v for k, v in params.where.items())]
     rows, cols, cells = gallery_layout(results, params.columns)
-    fig = plt.figure(figsize=(params.panel_size * cols, params.panel_size * rows))
+    keys_height = 0.9  # inches for the colour bar and legend
+    fig = plt.figure(figsize=(params.panel_size * cols, params.panel_size * rows + keys_height))
+    functions = set()
     for r, cell in zip(results, cells):
-        ax = fig.add_subplot(rows, cols, cell + 1, projection="3d")
+        ax = fig.add_subplot(rows, cols, cell + 1)
         label = Path(r.input_path).name.split(".")[0]
         sweep = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in r.sweep.items()
                           if k not in params.where and k != "morse.function")
@@ -74,8 +101,13 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
             continue
         caption = draw_item(ax, r, params)
         kind = r.final("function").kind if r.final("function") is not None else ""
-        ax.set_title(f"{label} ({kind}) {sweep}\n{caption}", fontsize=7)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.94, wspace=0.0, hspace=0.12)
+        functions.add(kind)
+        ax.set_title(f"{label} ({FUNCTION_NAMES.get(kind, kind)}) {sweep}\n{caption}", fontsize=7)
+    bottom = keys_height / (params.panel_size * rows + keys_height)
+    fig.subplots_adjust(left=0, right=1, bottom=bottom, top=1 - 0.25 / (params.panel_size * rows), wspace=0.02,
+                        hspace=0.18)
+    roots = any("root" in getattr(r.final(params.graph), "graph", ()) for r in results if r.ok)
+    add_skeleton_keys(fig, isolines=params.isolines, functions=functions - {""}, root=roots)
     return ReportOutput(figures={params.name: fig})
 
 
@@ -116,6 +148,7 @@ class StabilityParams(Params):
         description="sweep values of the reference item of each input (e.g. {noise.sigma: 0.0})")
     x: str = Field(description="sweep key on the x axis of the figure")
     undo_transform: bool = Field(False, description="map skeletons back through the inverse of the transform stage")
+    title: str = Field("", description="figure title (default: what is compared against what)")
 
 
 @report("skeleton_stability", params=StabilityParams)
@@ -161,13 +194,21 @@ def skeleton_stability_report(experiment, results, params: StabilityParams) -> R
         xs = list(range(len(pts))) if pts and isinstance(pts[0][0], str) else [p[0] for p in pts]
         axes[0].plot(xs, [p[1] for p in pts], marker="o", label=name)
         axes[1].plot(xs, [p[2] for p in pts], marker="o", label=name)
-    axes[0].set_ylabel("skeleton distance to reference / bbox diagonal")
-    axes[1].set_ylabel("endpoints")
+    reference = ", ".join(f"{axis_label(experiment, results, k).split(' (')[0]} = {v}" for k, v in params.reference.items())
+    xlabel = axis_label(experiment, results, params.x)
+    axes[0].set_ylabel("mean distance to the reference skeleton\n(× bounding-box diagonal)")
+    axes[0].set_title("Skeleton displacement", fontsize=10)
+    axes[1].set_ylabel("endpoints (degree-1 nodes)")
+    axes[1].set_title("Endpoint count", fontsize=10)
+    axes[1].yaxis.get_major_locator().set_params(integer=True)
     for ax in axes:
-        ax.set_xlabel(params.x)
+        ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3)
-    axes[1].legend(fontsize=7)
+    fig.suptitle(params.title or f"Skeleton stability against {xlabel.split(' (')[0]} (reference: {reference})",
+                 fontsize=11)
     fig.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8, frameon=False)
     return ReportOutput(tables={params.name: rows}, figures={params.name: fig})
 
 
