@@ -21,7 +21,8 @@ demo: $(STAMP)
 	$(BIN)/topomatch run configs/retrieval/demo.yaml
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	bash scripts/install-system-deps.sh --browser
+	TOPOMATCH_ARTEFACTS=$${TOPOMATCH_ARTEFACTS:-test-artefacts} $(BIN)/python -m pytest -q
 
 clean:
-	rm -rf runs .pytest_cache
+	rm -rf runs .pytest_cache test-artefacts

@@ -26,6 +26,21 @@ from topomatch.pipeline.registry import get_report
 #: Where reports put the scripts their interactive views need; the run page loads each once.
 ASSETS_DIR = "assets"
 
+#: Records JavaScript errors on the page (``<html data-js-errors="...">``), for people and for the
+#: headless-browser test of the run pages.
+_ERROR_HOOK = ("<script>window.addEventListener('error',function(e){var h=document.documentElement;"
+               "h.setAttribute('data-js-errors',(h.getAttribute('data-js-errors')||'')+String(e.message)+' | ')});"
+               "</script>")
+
+
+def _view_page(run_dir: Path, name: str, fragment: str) -> str:
+    """A standalone page of one interactive view (``views/NAME.html``); the run page inlines the part
+    between the view markers."""
+    scripts = "".join(f"<script src='../{ASSETS_DIR}/{html.escape(p.name)}'></script>"
+                      for p in sorted((run_dir / ASSETS_DIR).glob("*.js")))
+    return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(name)}</title>"
+            f"{_ERROR_HOOK}{scripts}</head><body>\n<!--view-->{fragment}<!--/view-->\n</body></html>")
+
 
 # --------------------------------------------------------------------------- running and writing
 
@@ -111,7 +126,7 @@ def write_report_outputs(run_dir: Path, outputs: dict[str, ReportOutput | str], 
             if not relative.startswith(f"{ASSETS_DIR}/"):
                 paths.append(relative)
         for name, fragment in out.html.items():
-            atomic_write_text(run_dir / "views" / f"{name}.html", fragment)
+            atomic_write_text(run_dir / "views" / f"{name}.html", _view_page(run_dir, name, fragment))
             paths.append(f"views/{name}.html")
         paths += [f"NOTE: {n}" for n in out.notes]
         written[label] = paths
@@ -248,7 +263,9 @@ def _section(run_dir: Path, label: str, call, paths: list[str], number: int) -> 
                      f"Files: {links}</figcaption></figure>")
     for p in paths:
         if p.startswith("views/"):
-            parts.append((run_dir / p).read_text())
+            page = (run_dir / p).read_text()
+            parts.append(page[page.index("<!--view-->") + 11:page.index("<!--/view-->")]
+                         + f"<p class='kind'><a href='{esc(p)}'>open this view on its own page</a></p>")
         elif p.endswith(".csv"):
             rows = json.loads((run_dir / p.replace(".csv", ".json")).read_text())
             parts.append(f"<h3>Table: {esc(humanise(Path(p).stem))} <span class='kind'>(<a href='{esc(p)}'>CSV</a>, "
@@ -268,7 +285,7 @@ def write_index_html(run_dir: Path, experiment, results, manifest: dict, written
         if (run_dir / ASSETS_DIR).is_dir() else []
     parts = [
         "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
-        f"<title>{esc(experiment.name)}</title><style>{_STYLE}</style>",
+        f"<title>{esc(experiment.name)}</title><style>{_STYLE}</style>{_ERROR_HOOK}",
         *(f"<script src='{esc(s)}'></script>" for s in scripts),
         "</head><body>",
         f"<h1>{esc(experiment.name)}</h1><p>{esc(experiment.raw.description)}</p>",

@@ -276,3 +276,108 @@ def export_report(experiment, results, params: ExportParams) -> ReportOutput:
                 rows.append({"item": r.item_id, "what": kind, "file": path, "vertices": value.graph.number_of_nodes(),
                              "faces": "", "edges": value.graph.number_of_edges()})
     return ReportOutput(tables={params.folder: rows}, files=files)
+
+
+# --------------------------------------------------------------------------- interactive 3D views
+
+
+class Skeleton3DParams(Params):
+    name: str = Field("skeletons_3d", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the view")
+    graph: Literal["skeleton", "reeb"] = Field("skeleton", description="the pruned skeleton or the full Reeb graph")
+    where: dict[str, float | int | str | bool] = Field(default_factory=dict,
+                                                       description="only items with these sweep values")
+    up: Literal["x", "y", "z"] = Field("y", description="the meshes' up axis (the camera's up)")
+    max_items: int = Field(12, ge=1, le=48, description="views on the page at most (the first items)")
+    columns: int = Field(3, ge=1, le=6, description="views side by side")
+    height: int = Field(420, ge=200, le=1200, description="pixels per row of views")
+    opacity: float = Field(0.55, gt=0, le=1, description="opacity of the surface")
+
+
+def plotly_js() -> bytes:
+    """plotly.js as shipped inside the installed ``plotly`` package (the page works offline)."""
+    from importlib.resources import files
+
+    return files("plotly").joinpath("package_data", "plotly.min.js").read_bytes()
+
+
+def _item_traces(r, params: Skeleton3DParams, show_legend: bool) -> list:
+    """The plotly traces of one item: the mesh coloured by the Morse function, the graph's edges as
+    lines, endpoints (red) and the root (gold diamond)."""
+    import plotly.graph_objects as go
+
+    from topomatch.stages.reeb.prune import endpoints
+
+    mesh, function = r.final("mesh"), r.final("function")
+    kind = function.kind if function is not None else ""
+    V, F = mesh.V, mesh.F
+    intensity = None
+    if function is not None:  # each shape from its minimum (0) to its maximum (1), as in the static figures
+        f = np.asarray(function.values, float)
+        intensity = (f - f.min()) / (np.ptp(f) or 1.0)
+    traces = [go.Mesh3d(x=V[:, 0], y=V[:, 1], z=V[:, 2], i=F[:, 0], j=F[:, 1], k=F[:, 2],
+                        intensity=intensity, colorscale="RdBu_r", cmin=0.0, cmax=1.0,
+                        opacity=params.opacity, name="surface", showscale=show_legend,
+                        colorbar=dict(title=dict(text="Morse function<br>(min 0, max 1)", side="right"),
+                                      len=0.6, thickness=12),
+                        hovertemplate=f"{FUNCTION_NAMES.get(kind, kind)}: %{{intensity:.3f}} of its range"
+                                      "<extra>surface</extra>")]
+    value = r.final(params.graph)
+    if value is None:
+        return traces
+    graph = value.graph
+    ends = list(value.endpoints) if params.graph == "skeleton" else endpoints(graph)
+    xs, ys, zs = [], [], []
+    for a, b in graph.edges():
+        for n in (a, b):
+            p = graph.nodes[n]["pos"]
+            xs.append(float(p[0])); ys.append(float(p[1])); zs.append(float(p[2]))
+        xs.append(None); ys.append(None); zs.append(None)
+    traces.append(go.Scatter3d(x=xs, y=ys, z=zs, mode="lines", line=dict(color="black", width=5),
+                               name="skeleton edge", legendgroup="edge", showlegend=show_legend, hoverinfo="skip"))
+    if ends:
+        P = np.array([graph.nodes[n]["pos"] for n in ends], float)
+        traces.append(go.Scatter3d(x=P[:, 0], y=P[:, 1], z=P[:, 2], mode="markers", name="endpoint",
+                                   marker=dict(color="red", size=6), legendgroup="end", showlegend=show_legend,
+                                   text=[str(n) for n in ends], hovertemplate="endpoint %{text}<extra></extra>"))
+    if "root" in graph:
+        p = graph.nodes["root"]["pos"]
+        traces.append(go.Scatter3d(x=[p[0]], y=[p[1]], z=[p[2]], mode="markers", name="root",
+                                   marker=dict(color="gold", size=9, symbol="diamond", line=dict(color="black", width=1)),
+                                   legendgroup="root", showlegend=show_legend, hovertemplate="root<extra></extra>"))
+    return traces
+
+
+@report("skeleton_3d", params=Skeleton3DParams)
+def skeleton_3d_report(experiment, results, params: Skeleton3DParams) -> ReportOutput:
+    """Interactive 3D views (rotate, zoom, hover), side by side: each mesh coloured by its Morse function,
+    with its skeleton as lines, endpoints (red) and root (gold); plotly.js is written into the run's
+    ``assets/`` folder, so the page works offline."""
+    from plotly.subplots import make_subplots
+
+    chosen = [r for r in results if r.ok and r.final("mesh") is not None
+              and all(r.sweep.get(k) == v for k, v in params.where.items())][:params.max_items]
+    if not chosen:
+        return ReportOutput(notes=["no item to show (none succeeded, or none matches 'where')"])
+    cols = min(params.columns, len(chosen))
+    rows = -(-len(chosen) // cols)
+    titles = []
+    for r in chosen:
+        kind = r.final("function").kind if r.final("function") is not None else ""
+        sweep = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in r.sweep.items() if k not in params.where)
+        titles.append(f"{Path(r.input_path).name.split('.')[0]} {sweep}".strip() + (f" ({kind})" if kind else ""))
+    fig = make_subplots(rows=rows, cols=cols, specs=[[{"type": "scene"}] * cols for _ in range(rows)],
+                        subplot_titles=titles, horizontal_spacing=0.01, vertical_spacing=0.04)
+    for i, r in enumerate(chosen):
+        for trace in _item_traces(r, params, show_legend=i == 0):
+            fig.add_trace(trace, row=i // cols + 1, col=i % cols + 1)
+    up = {a: float(a == params.up) for a in "xyz"}
+    eye = {"x": {"x": 0.3, "y": 1.6, "z": 1.2}, "y": {"x": 1.2, "y": 0.3, "z": 1.6}, "z": {"x": 1.6, "y": -1.2, "z": 0.3}}
+    fig.update_scenes(aspectmode="data", xaxis_visible=False, yaxis_visible=False, zaxis_visible=False,
+                      camera=dict(up=up, eye=eye[params.up]))
+    fig.update_layout(height=params.height * rows + 40, margin=dict(l=0, r=0, t=30, b=40),
+                      legend=dict(orientation="h", y=0.0, yanchor="top", x=0.0), paper_bgcolor="white")
+    fragment = fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"view-{params.name}",
+                           config={"displaylogo": False, "responsive": True})
+    return ReportOutput(html={params.name: f"<div class='view3d'>{fragment}</div>"},
+                        files={"assets/plotly.min.js": plotly_js()},
+                        notes=["Drag to rotate, scroll to zoom, hover for values; double-click resets a view."])
