@@ -66,25 +66,16 @@ def draw_scene(ax, V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = 
     line_width : skeleton width as a fraction of the view's extent.
     pieces : each skeleton edge is cut into this many pieces for the depth sort.
     """
-    from matplotlib import colormaps
     from matplotlib.collections import PolyCollection
     from matplotlib.patches import Polygon
 
-    from topomatch.stages.mesh.render import face_shading
+    from topomatch.stages.mesh.render import face_colors
 
     B = view_basis(elev, azim)
     S = np.asarray(V, float) @ B.T  # screen x, screen y, depth (larger: nearer)
     extent = float(np.ptp(S[:, :2], axis=0).max()) or 1.0
     polys, colors, depth = [S[F][:, :, :2]], [], [S[F][:, :, 2].mean(axis=1)]
-    shade = face_shading(V, F)[:, None]
-    if values is not None:
-        v = np.asarray(values, dtype=float)[F].mean(axis=1)
-        span = np.ptp(v)
-        t = (v - v.min()) / span if span > 1e-12 * max(np.abs(v).max(), 1e-300) else np.full_like(v, 0.5)
-        base = colormaps[cmap](t)[:, :3]
-    else:
-        base = np.broadcast_to(np.array([0.75, 0.78, 0.85]), (len(F), 3))
-    colors.append(np.column_stack([np.clip(base * shade, 0, 1), np.full(len(F), alpha)]))
+    colors.append(np.column_stack([face_colors(V, F, values=values, cmap=cmap), np.full(len(F), alpha)]))
     if isolines is not None and len(isolines):
         seg = np.asarray(isolines, float) @ B.T
         polys.append(_quads(seg[:, 0, :2], seg[:, 1, :2], 0.0015 * extent))
