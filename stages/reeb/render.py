@@ -49,7 +49,8 @@ def _star(c: np.ndarray, radius: float) -> np.ndarray:
 
 def draw_scene(ax, V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = None, cmap: str = "coolwarm",
                isolines: np.ndarray | None = None, graph=None, endpoints=(), elev: float = 15.0,
-               azim: float = -60.0, alpha: float = 0.45, line_width: float = 0.006, pieces: int = 6) -> None:
+               azim: float = -60.0, alpha: float = 0.45, line_width: float = 0.006, pieces: int = 6,
+               faded: np.ndarray | None = None, paths: list | None = None) -> None:
     """Draw a surface with its skeleton on a 2D axis, depth-sorted (see the module's doc).
 
     Parameters
@@ -65,6 +66,10 @@ def draw_scene(ax, V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = 
     endpoints : nodes drawn as red discs.
     line_width : skeleton width as a fraction of the view's extent.
     pieces : each skeleton edge is cut into this many pieces for the depth sort.
+    faded : (m,) bool, optional
+        Faces drawn in light grey instead of their colour (e.g. bands not reached yet).
+    paths : list of (nodes, rgba), optional
+        Paths through ``graph`` drawn thicker in their colour (e.g. shortest paths).
     """
     from matplotlib.collections import PolyCollection
     from matplotlib.patches import Polygon
@@ -75,7 +80,10 @@ def draw_scene(ax, V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = 
     S = np.asarray(V, float) @ B.T  # screen x, screen y, depth (larger: nearer)
     extent = float(np.ptp(S[:, :2], axis=0).max()) or 1.0
     polys, colors, depth = [S[F][:, :, :2]], [], [S[F][:, :, 2].mean(axis=1)]
-    colors.append(np.column_stack([face_colors(V, F, values=values, cmap=cmap), np.full(len(F), alpha)]))
+    rgb = face_colors(V, F, values=values, cmap=cmap)
+    if faded is not None:
+        rgb = np.where(np.asarray(faded, bool)[:, None], 0.55 + 0.4 * rgb.mean(axis=1, keepdims=True), rgb)
+    colors.append(np.column_stack([rgb, np.full(len(F), alpha)]))
     if isolines is not None and len(isolines):
         seg = np.asarray(isolines, float) @ B.T
         polys.append(_quads(seg[:, 0, :2], seg[:, 1, :2], 0.0015 * extent))
@@ -89,6 +97,12 @@ def draw_scene(ax, V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = 
             polys.append(_quads(pts[:-1, :2], pts[1:, :2], line_width * extent / 2))
             depth.append((pts[:-1, 2] + pts[1:, 2]) / 2)
             colors.append(np.tile([0, 0, 0, 1.0], (pieces, 1)))
+        for nodes, rgba in paths or ():
+            for a, b in zip(nodes[:-1], nodes[1:]):
+                pts = pos[a] + t * (pos[b] - pos[a])
+                polys.append(_quads(pts[:-1, :2], pts[1:, :2], 1.4 * line_width * extent))
+                depth.append((pts[:-1, 2] + pts[1:, 2]) / 2 + 2e-6 * extent)  # over the plain edge
+                colors.append(np.tile(rgba, (pieces, 1)))
         inner = [n for n in graph.nodes if n not in endpoints and n != "root"]
         for nodes, radius, rgba in ((inner, 1.2, (0, 0, 0, 1)), (list(endpoints), 2.6, (0.9, 0, 0, 1))):
             if nodes:

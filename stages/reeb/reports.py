@@ -14,7 +14,8 @@ from topomatch.pipeline.contract import Params, ReportOutput, axis_label, galler
 
 class SkeletonGalleryParams(Params):
     name: str = Field("skeletons", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure")
-    graph: Literal["skeleton", "reeb"] = Field("skeleton", description="draw the pruned skeleton or the full Reeb graph")
+    graph: Literal["skeleton", "reeb", "none"] = Field(
+        "skeleton", description="draw the pruned skeleton, the full Reeb graph, or no graph (the function and level sets)")
     up: Literal["x", "y", "z"] = Field("y", description="the meshes' up axis")
     isolines: bool = Field(True, description="draw the iso-curves of the level sets")
     where: dict[str, float | int | str | bool] = Field(default_factory=dict,
@@ -24,6 +25,7 @@ class SkeletonGalleryParams(Params):
     azim: float = -60.0
     columns: int = Field(4, ge=1)
     panel_size: float = Field(3.2, gt=0)
+    title: str = Field("", description="figure title (default: none; the run page heads it with the name)")
 
 
 #: Names of the Morse functions for colour bars and captions.
@@ -46,7 +48,7 @@ def draw_item(ax, r, params: SkeletonGalleryParams) -> str:
     if params.graph == "skeleton" and skeleton is not None:
         graph, ends = skeleton.graph, skeleton.endpoints
         caption = f"{len(ends)} endpoints, {skeleton.cycle_rank} cycle{'s' * (skeleton.cycle_rank != 1)}"
-    elif reeb is not None:
+    elif params.graph == "reeb" and reeb is not None:
         graph = reeb.graph
         ends = endpoints(graph)
         caption = f"{reeb.n_nodes} nodes, {len(ends)} endpoints, {reeb.cycle_rank} cycle{'s' * (reeb.cycle_rank != 1)}"
@@ -56,13 +58,15 @@ def draw_item(ax, r, params: SkeletonGalleryParams) -> str:
         graph = nx.relabel_nodes(graph, lambda n: n, copy=True)
         for n in graph.nodes:
             graph.nodes[n]["pos"] = np.asarray(graph.nodes[n]["pos"], float)[order]
+    if params.graph == "none" and level_sets is not None:
+        caption = f"{level_sets.n_levels} bands, {len(level_sets.curves.level)} iso-curve segments"
     iso = level_sets.curves.segments[:, :, order] if (params.isolines and level_sets is not None) else None
     draw_scene(ax, mesh.V[:, order], mesh.F, values=None if function is None else function.values, cmap="coolwarm",
                isolines=iso, graph=graph, endpoints=ends, elev=params.elev, azim=params.azim, alpha=params.alpha)
     return caption
 
 
-def add_skeleton_keys(fig, *, isolines: bool, functions: set[str], root: bool) -> None:
+def add_skeleton_keys(fig, *, isolines: bool, functions: set[str], root: bool, graph: bool = True) -> None:
     """A colour bar of the Morse function (each shape's own range, minimum to maximum) and a legend of
     the skeleton's marks, along the bottom of ``fig``."""
     import matplotlib as mpl
@@ -70,12 +74,16 @@ def add_skeleton_keys(fig, *, isolines: bool, functions: set[str], root: bool) -
     from topomatch.stages.reeb.render import skeleton_legend_handles
 
     names = ", ".join(sorted(FUNCTION_NAMES.get(f, f) for f in functions)) or "Morse function"
-    cax = fig.add_axes([0.05, 0.045, 0.36, 0.016])
+    height = fig.get_figheight()  # the keys take the bottom 0.9 inch, whatever the figure's size
+    cax = fig.add_axes([0.05, 0.5 / height, 0.36, 0.14 / height])
     bar = fig.colorbar(mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(0, 1), cmap="coolwarm"), cax=cax,
                        orientation="horizontal", ticks=[0, 0.5, 1])
     bar.ax.set_xticklabels(["min", "", "max"], fontsize=7)
-    bar.set_label(f"Morse function ({names}), each shape from its minimum to its maximum", fontsize=7)
-    fig.legend(handles=skeleton_legend_handles(isolines=isolines, root=root), loc="lower left",
+    bar.set_label(f"{names[:1].upper() + names[1:]}\n(each shape: its minimum to its maximum)", fontsize=7)
+    handles = skeleton_legend_handles(isolines=isolines, root=root)
+    if not graph:
+        handles = handles[-1:] if isolines else []
+    fig.legend(handles=handles, loc="lower left",
                bbox_to_anchor=(0.47, 0.0), ncol=2, fontsize=7, frameon=False)
 
 
@@ -104,11 +112,79 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
         functions.add(kind)
         ax.set_title(f"{label} ({FUNCTION_NAMES.get(kind, kind)}) {sweep}\n{caption}", fontsize=7)
     bottom = keys_height / (params.panel_size * rows + keys_height)
-    fig.subplots_adjust(left=0, right=1, bottom=bottom, top=1 - 0.25 / (params.panel_size * rows), wspace=0.02,
-                        hspace=0.18)
-    roots = any("root" in getattr(r.final(params.graph), "graph", ()) for r in results if r.ok)
-    add_skeleton_keys(fig, isolines=params.isolines, functions=functions - {""}, root=roots)
+    top_inches = 0.3 + 0.35 * bool(params.title)
+    fig.subplots_adjust(left=0, right=1, bottom=bottom, top=1 - top_inches / (params.panel_size * rows + keys_height),
+                        wspace=0.02, hspace=0.18)
+    if params.title:
+        fig.suptitle(params.title, fontsize=10)
+    roots = params.graph != "none" and any("root" in getattr(r.final(params.graph), "graph", ())
+                                           for r in results if r.ok)
+    add_skeleton_keys(fig, isolines=params.isolines, functions=functions - {""}, root=roots,
+                      graph=params.graph != "none")
     return ReportOutput(figures={params.name: fig})
+
+
+# --------------------------------------------------------------------------- the algorithm step by step (thesis Fig. 3.2)
+
+
+class ReebStepsParams(Params):
+    name: str = Field("reeb_steps", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure and table")
+    steps: list[int] = Field(default_factory=lambda: [1, 3, 6, 11, 16, 22], min_length=1,
+                             description="numbers of bands processed, one panel each (the last: all)")
+    where: dict[str, float | int | str | bool] = Field(default_factory=dict,
+                                                       description="only items with these sweep values")
+    max_items: int = Field(2, ge=1, le=8, description="items shown (one row each)")
+    up: Literal["x", "y", "z"] = Field("y", description="the meshes' up axis")
+    elev: float = 15.0
+    azim: float = -60.0
+    panel_size: float = Field(2.6, gt=0)
+
+
+@report("reeb_steps", params=ReebStepsParams)
+def reeb_steps_report(experiment, results, params: ReebStepsParams) -> ReportOutput:
+    """Reeb graph extraction step by step (Algorithm 1): after k bands, the bands swept so far in colour,
+    the rest grey, and the graph of their components; a table of nodes, edges and cycles per step."""
+    import matplotlib.pyplot as plt
+
+    import networkx as nx
+
+    from topomatch.stages.mesh.render import UP_ORDER
+    from topomatch.stages.reeb.render import draw_scene
+
+    chosen = [r for r in results if r.ok and r.final("reeb") is not None and r.final("level_sets") is not None
+              and all(r.sweep.get(k) == v for k, v in params.where.items())][:params.max_items]
+    order = list(UP_ORDER[params.up])
+    cols = len(params.steps)
+    fig = plt.figure(figsize=(params.panel_size * cols, params.panel_size * max(len(chosen), 1) + 0.6))
+    rows = []
+    for i, r in enumerate(chosen):
+        mesh, ls, reeb = r.final("mesh"), r.final("level_sets"), r.final("reeb")
+        function = r.final("function")
+        n = ls.n_levels
+        band = np.asarray(ls.vertex_band)
+        for j, k in enumerate(params.steps):
+            k = min(k, n)
+            keep = [v for v, d in reeb.graph.nodes(data=True) if v == "root" or d["band"] < k]
+            sub = reeb.graph.subgraph(keep).copy()
+            for v in sub.nodes:
+                sub.nodes[v]["pos"] = np.asarray(sub.nodes[v]["pos"], float)[order]
+            body = sub.subgraph([v for v in sub if v != "root"])  # cycles of the surface, as reeb.cycle_rank
+            cycles = body.number_of_edges() - body.number_of_nodes() + nx.number_connected_components(body) \
+                if len(body) else 0
+            rows.append({"item": r.item_id, "bands": k, "of": n, "nodes": sub.number_of_nodes(),
+                         "edges": sub.number_of_edges(), "cycles": cycles})
+            ax = fig.add_subplot(max(len(chosen), 1), cols, i * cols + j + 1)
+            iso = ls.curves.segments[ls.curves.level < k][:, :, order]
+            draw_scene(ax, mesh.V[:, order], mesh.F, values=None if function is None else function.values,
+                       isolines=iso, graph=sub, endpoints=(), elev=params.elev, azim=params.azim, alpha=0.5,
+                       faded=band[mesh.F].min(axis=1) >= k)
+            ax.set_title(f"{Path(r.input_path).name.split('.')[0]}: {k} of {n} bands\n{sub.number_of_nodes()} nodes, "
+                         f"{cycles} cycle{'s' * (cycles != 1)}", fontsize=7)
+    fig.suptitle("Reeb graph extraction step by step: bands swept so far in colour, their components as nodes",
+                 fontsize=10)
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=1 - 0.6 / (params.panel_size * max(len(chosen), 1) + 0.6),
+                        wspace=0.02, hspace=0.2)
+    return ReportOutput(tables={params.name: rows}, figures={params.name: fig})
 
 
 # --------------------------------------------------------------------------- stability against a reference item
