@@ -9,25 +9,8 @@ import pytest
 import yaml
 
 from topomatch.cli import main
-from topomatch.cli.common import SCHEMA_PATH
+from cli_schema import SCHEMA, check
 from tests_paths import BUNDLED_MESHES, ITK_DIR
-
-SCHEMA = json.loads(SCHEMA_PATH.read_text())
-
-
-def check(document: dict, definition: str) -> None:
-    """Validate ``document`` against ``$defs/definition`` (jsonschema when installed, else the required keys)."""
-    try:
-        import jsonschema
-    except ImportError:  # pragma: no cover - jsonschema is a test dependency
-        spec = SCHEMA["$defs"][definition]
-        assert set(spec["required"]) <= set(document)
-        if spec.get("additionalProperties") is False:
-            assert set(document) <= set(spec["properties"])
-        return
-    schema = {k: v for k, v in SCHEMA.items() if k != "anyOf"} | {"$ref": f"#/$defs/{definition}"}
-    jsonschema.Draft202012Validator(schema).validate(document)
-    jsonschema.Draft202012Validator(SCHEMA).validate(document)  # and the top-level schema accepts it
 
 
 def run_json(capsys, *args):

@@ -1,7 +1,8 @@
 """The ``topomatch`` command line: the engine's commands and each domain's.
 
 ``run``, ``validate``, ``stages``, ``configs`` (:mod:`.engine`); ``skeleton`` (:mod:`.skeleton`);
-``match``, ``index``, ``query``, ``evaluate`` (:mod:`.retrieval`); ``register`` (:mod:`.registration`).
+``match``, ``index``, ``query``, ``evaluate`` (:mod:`.retrieval`); ``register`` (:mod:`.registration`);
+``thesis`` (:mod:`.thesis`).
 Each command is a thin layer over the Python API (:mod:`topomatch`), with its options generated
 from the params models (:mod:`topomatch.pipeline.cli_options`). Errors print one short message
 naming the file and the problem and exit non-zero: 2 for a bad config or usage, 1 for bad input
@@ -19,11 +20,11 @@ import logging
 import sys
 
 from topomatch import __version__
-from topomatch.cli import common, engine, registration, retrieval, skeleton
+from topomatch.cli import common, engine, registration, retrieval, skeleton, thesis
 from topomatch.pipeline.errors import ConfigError, InputError, RunError, StageError, TopomatchError
 
 #: The command modules, in --help order; each has ``add_parsers(subparsers)``.
-COMMANDS = (engine, skeleton, retrieval, registration)
+COMMANDS = (engine, skeleton, retrieval, registration, thesis)
 
 
 class Parser(argparse.ArgumentParser):
