@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import csv
 import html
+import inspect
 import io
 import json
 import math
@@ -186,7 +187,7 @@ def html_table(rows: list[dict[str, Any]], limit: int = 200) -> str:
 
 def humanise(name: str) -> str:
     """A file or key name as words: ``skeleton_vs_noise`` -> ``Skeleton vs noise``."""
-    words = name.replace("_", " ").replace("-", " ").strip()
+    words = " ".join("3D" if w.lower() == "3d" else w for w in name.replace("_", " ").replace("-", " ").split())
     return words[:1].upper() + words[1:]
 
 
@@ -194,8 +195,8 @@ def report_heading(call) -> tuple[str, str]:
     """(title, caption) of a report: its ``title`` parameter or its name in words, and the report's doc."""
     title = getattr(call.params, "title", "") or ""
     name = getattr(call.params, "name", "") or getattr(call.params, "folder", "") or call.name
-    spec = get_report(call.name)
-    return (title or humanise(name)), spec.doc
+    doc = " ".join((inspect.getdoc(get_report(call.name).func) or "").split("\n\n")[0].split())
+    return (title or humanise(name)), doc
 
 
 _STYLE = """
@@ -243,7 +244,8 @@ def _figure_paths(paths: list[str]) -> dict[str, list[str]]:
     return out
 
 
-def _section(run_dir: Path, label: str, call, paths: list[str], number: int) -> str:
+def _section(run_dir: Path, label: str, call, paths: list[str], number: int, figures: list[int]) -> str:
+    """One report's section; ``figures`` holds the running figure count (updated)."""
     esc = html.escape
     title, caption = report_heading(call) if call is not None else (humanise(label), "")
     parts = [f"<h2 id='r{number}'>{esc(title)} <span class='kind'>({esc(label)})</span></h2>"]
@@ -254,12 +256,13 @@ def _section(run_dir: Path, label: str, call, paths: list[str], number: int) -> 
             parts.append(f"<p class='err'>{esc(p)}</p>")
         elif p.startswith("NOTE: "):
             parts.append(f"<p>{esc(p[6:])}</p>")
-    for k, (stem, files) in enumerate(_figure_paths(paths).items(), 1):
+    for stem, files in _figure_paths(paths).items():
+        figures[0] += 1
         shown = next((f for f in files if f.endswith((".png", ".svg"))), None)
         links = " &middot; ".join(f"<a href='{esc(f)}'>{esc(Path(f).suffix[1:].upper())}</a>" for f in files)
         name = humanise(Path(stem).name)
         image = f"<img src='{esc(shown)}' alt='{esc(name)}'>" if shown else ""
-        parts.append(f"<figure>{image}<figcaption>Figure {number}{'.' + str(k) if k > 1 else ''}: {esc(name)}. {esc(caption)} "
+        parts.append(f"<figure>{image}<figcaption>Figure {figures[0]}: {esc(name)}. {esc(caption)} "
                      f"Files: {links}</figcaption></figure>")
     for p in paths:
         if p.startswith("views/"):
@@ -299,8 +302,9 @@ def write_index_html(run_dir: Path, experiment, results, manifest: dict, written
         parts.append("<nav><h2>Contents</h2><ul>" + "".join(
             f"<li><a href='#r{i}'>{esc(report_heading(calls[label])[0] if label in calls else humanise(label))}</a></li>"
             for i, (label, _) in enumerate(sections, 1)) + "<li><a href='#items'>All items</a></li></ul></nav>")
+    figures = [0]
     for i, (label, paths) in enumerate(sections, 1):
-        parts.append(_section(run_dir, label, calls.get(label), paths, i))
+        parts.append(_section(run_dir, label, calls.get(label), paths, i, figures))
     parts.append("<h2 id='items'>All items</h2><p>One row per input and sweep point: the summary of every stage "
                  "(<a href='tables/results.csv'>CSV</a>).</p>" + html_table([r.row() for r in results]))
     parts.append("</body></html>")

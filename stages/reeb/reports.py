@@ -53,9 +53,7 @@ def draw_item(ax, r, params: SkeletonGalleryParams) -> str:
         ends = endpoints(graph)
         caption = f"{reeb.n_nodes} nodes, {len(ends)} endpoints, {reeb.cycle_rank} cycle{'s' * (reeb.cycle_rank != 1)}"
     if graph is not None:
-        import networkx as nx
-
-        graph = nx.relabel_nodes(graph, lambda n: n, copy=True)
+        graph = graph.copy()  # positions in display orientation, the result's graph untouched
         for n in graph.nodes:
             graph.nodes[n]["pos"] = np.asarray(graph.nodes[n]["pos"], float)[order]
     if params.graph == "none" and level_sets is not None:
@@ -367,6 +365,7 @@ class Skeleton3DParams(Params):
     columns: int = Field(3, ge=1, le=6, description="views side by side")
     height: int = Field(420, ge=200, le=1200, description="pixels per row of views")
     opacity: float = Field(0.55, gt=0, le=1, description="opacity of the surface")
+    title: str = Field("", description="heading on the run page (default: the name in words)")
 
 
 def plotly_js() -> bytes:

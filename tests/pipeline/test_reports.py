@@ -62,6 +62,6 @@ def test_run_page_summary_headings_figure_formats_and_labels(small_config, tmp_p
     assert "2 of 6 items failed" in summary and "s computing" in summary and "load &rarr; clean" in summary
     assert "<h2 id='r1'>Areas <span class='kind'>(table)</span></h2>" in page
     assert "<h2 id='r2'>Area vs noise <span class='kind'>(line_plot)</span></h2>" in page
-    assert "<figcaption>Figure 2: Area vs noise." in page and "figures/area_vs_noise.pdf" in page
+    assert "<figcaption>Figure 1: Area vs noise." in page and "figures/area_vs_noise.pdf" in page
     assert "broken.off" in page[page.index("Failed items"):]
     assert not re.search(r"\d\.\d{4,}e-\d\d", page)  # no unformatted floats such as 1.8083e-16
