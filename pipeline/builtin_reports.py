@@ -93,7 +93,8 @@ def line_plot_report(experiment, results, params: LinePlotParams) -> ReportOutpu
             ax.set_xscale("symlog", linthresh=1e-4)
         ax.grid(alpha=0.3)
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.suptitle(params.title or f"{' and '.join(names)} against {xlabel.split(' (')[0]}".capitalize(), fontsize=11)
+    title = params.title or f"{' and '.join(names)} against {xlabel.split(' (')[0]}"
+    fig.suptitle(title[:1].upper() + title[1:], fontsize=11)
     fig.tight_layout()
     # one legend for all panels, beside them, so that it hides no data
     fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8, frameon=False)
