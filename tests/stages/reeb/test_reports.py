@@ -70,7 +70,7 @@ def test_gallery_has_keys_and_every_format(skeleton_run):
     d = skeleton_run.run_dir
     assert (d / "figures" / "gallery.png").stat().st_size > 20_000
     svg = (d / "figures" / "gallery.svg").read_text()
-    for text in ("endpoint (degree 1)", "root", "skeleton edge", "Morse function (mixture distance)"):
+    for text in ("endpoint (degree 1)", "root", "skeleton edge", "Mixture distance", "its minimum to its maximum"):
         assert text in svg, text
     page = (d / "index.html").read_text()
     assert "<h2 id='r2'>Gallery" in page and "figures/gallery.svg" in page
