@@ -4,28 +4,22 @@ paths between endpoints and from the root (centroid), and their features a, dv, 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
-
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.contract import Params, ReportOutput, report
+from topomatch.pipeline.contract import ReportOutput, report
+from topomatch.stages.reeb.reports import ItemRowsParams
 
 #: Colours of the highlighted paths (one per endpoint, cycled).
 PATH_COLOURS = ((0.12, 0.47, 0.71, 1), (1.0, 0.5, 0.05, 1), (0.17, 0.63, 0.17, 1), (0.58, 0.4, 0.74, 1),
                 (0.55, 0.34, 0.29, 1), (0.89, 0.47, 0.76, 1), (0.09, 0.75, 0.81, 1), (0.74, 0.74, 0.13, 1))
 
 
-class EndpointPathsParams(Params):
+class EndpointPathsParams(ItemRowsParams):
     name: str = Field("endpoint_paths", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure and table")
-    where: dict[str, float | int | str | bool] = Field(default_factory=dict,
-                                                       description="only items with these sweep values")
     max_items: int = Field(3, ge=1, le=12, description="items shown (one row each)")
     source: int = Field(0, ge=0, description="the endpoint (in row order) whose paths to the others are drawn")
-    up: Literal["x", "y", "z"] = Field("y", description="the meshes' up axis")
-    elev: float = 15.0
-    azim: float = -60.0
-    panel_size: float = Field(3.2, gt=0)
+    panel_size: float = Field(3.2, gt=0, description="inches per panel")
 
 
 @report("endpoint_paths", params=EndpointPathsParams)

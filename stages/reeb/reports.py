@@ -125,17 +125,22 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
 # --------------------------------------------------------------------------- the algorithm step by step (thesis Fig. 3.2)
 
 
-class ReebStepsParams(Params):
-    name: str = Field("reeb_steps", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure and table")
-    steps: list[int] = Field(default_factory=lambda: [1, 3, 6, 11, 16, 22], min_length=1,
-                             description="numbers of bands processed, one panel each (the last: all)")
+class ItemRowsParams(Params):
+    """Figures with one row of panels per item: which items, and the view."""
+
     where: dict[str, float | int | str | bool] = Field(default_factory=dict,
                                                        description="only items with these sweep values")
-    max_items: int = Field(2, ge=1, le=8, description="items shown (one row each)")
+    max_items: int = Field(2, ge=1, le=12, description="items shown (one row each)")
     up: Literal["x", "y", "z"] = Field("y", description="the meshes' up axis")
     elev: float = 15.0
     azim: float = -60.0
-    panel_size: float = Field(2.6, gt=0)
+    panel_size: float = Field(2.6, gt=0, description="inches per panel")
+
+
+class ReebStepsParams(ItemRowsParams):
+    name: str = Field("reeb_steps", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure and table")
+    steps: list[int] = Field(default_factory=lambda: [1, 3, 6, 11, 16, 22], min_length=1,
+                             description="numbers of bands processed, one panel each (the last: all)")
 
 
 @report("reeb_steps", params=ReebStepsParams)
