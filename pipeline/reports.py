@@ -195,7 +195,7 @@ def report_heading(call) -> tuple[str, str]:
     """(title, caption) of a report: its ``title`` parameter or its name in words, and the report's doc."""
     title = getattr(call.params, "title", "") or ""
     name = getattr(call.params, "name", "") or getattr(call.params, "folder", "") or call.name
-    doc = " ".join((inspect.getdoc(get_report(call.name).func) or "").split("\n\n")[0].split())
+    doc = " ".join((inspect.getdoc(get_report(call.name).func) or "").split("\n\n")[0].split()).replace("``", "")
     return (title or humanise(name)), doc
 
 
