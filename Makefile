@@ -4,7 +4,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test bench clean
+.PHONY: install demo test thesis bench clean
 
 $(STAMP): pyproject.toml
 	bash scripts/install-system-deps.sh
@@ -20,8 +20,15 @@ demo: $(STAMP)
 	$(BIN)/topomatch run configs/registration/demo.yaml
 	$(BIN)/topomatch run configs/retrieval/demo.yaml
 
+# Every figure and table of the thesis on one page (thesis/thesis.html); the external data root
+# (DATA_ROOT, default ../shared/data when it exists) adds the configs that need it.
+DATA_ROOT ?= $(wildcard ../shared/data)
+thesis: $(STAMP)
+	$(BIN)/topomatch thesis --out thesis $(if $(DATA_ROOT),--data-root $(DATA_ROOT))
+
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	bash scripts/install-system-deps.sh --browser
+	TOPOMATCH_ARTEFACTS=$${TOPOMATCH_ARTEFACTS:-test-artefacts} $(BIN)/python -m pytest -q
 
 clean:
-	rm -rf runs .pytest_cache
+	rm -rf runs thesis .pytest_cache test-artefacts

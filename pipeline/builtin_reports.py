@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import Field
 
-from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, report
+from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, axis_label, report
 
 class TableParams(Params):
     name: str = Field("summary", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the table")
@@ -53,7 +53,9 @@ class LinePlotParams(Params):
     group_by: str = Field("input", description="column that separates the lines")
     logx: bool = False
     normalize: bool = Field(False, description="divide each line by its value at the smallest x")
-    title: str = ""
+    title: str = Field("", description="figure title (default: the y quantities against the x quantity)")
+    xlabel: str = Field("", description="x-axis label (default: the sweep key's or column's name and unit)")
+    ylabels: list[str] = Field(default_factory=list, description="y-axis labels, one per y (default: names and units)")
 
 
 @report("line_plot", params=LinePlotParams)
@@ -61,9 +63,13 @@ def line_plot_report(experiment, results, params: LinePlotParams) -> ReportOutpu
     """A results column against a sweep key or column, one line per input."""
     import matplotlib.pyplot as plt
 
+    if params.ylabels and len(params.ylabels) != len(params.y):
+        raise ConfigError(f"line_plot {params.name}: {len(params.ylabels)} ylabels for {len(params.y)} y columns")
     rows = [r.row() for r in results if r.ok]
-    fig, axes = plt.subplots(1, len(params.y), figsize=(4.5 * len(params.y), 3.6), squeeze=False)
-    for ax, y in zip(axes[0], params.y):
+    xlabel = params.xlabel or axis_label(experiment, results, params.x)
+    fig, axes = plt.subplots(1, len(params.y), figsize=(4.6 * len(params.y), 3.6), squeeze=False)
+    names = []
+    for i, (ax, y) in enumerate(zip(axes[0], params.y)):
         groups: dict[str, list[tuple[float, float]]] = {}
         for row in rows:
             if params.x in row and y in row:
@@ -77,13 +83,19 @@ def line_plot_report(experiment, results, params: LinePlotParams) -> ReportOutpu
                 raise ConfigError(f"line_plot {params.name}: cannot normalise {y!r} by its value 0 at {params.x}={pts[0][0]}")
             scale = pts[0][1] if params.normalize else 1.0
             ax.plot([p[0] for p in pts], [p[1] / scale for p in pts], marker="o", label=group)
-        ax.set_xlabel(params.x)
-        ax.set_ylabel(f"{y} / value at {params.x.split('.')[-1]}={pts[0][0]:g}" if params.normalize else y)
+        name = params.ylabels[i] if params.ylabels else axis_label(experiment, results, y)
+        names.append(name.split(" (")[0])
+        if params.normalize and not params.ylabels:
+            name = f"{name.split(' (')[0]}\nrelative to its value at {pts[0][0]:g}"
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(name)
         if params.logx:
             ax.set_xscale("symlog", linthresh=1e-4)
         ax.grid(alpha=0.3)
-    axes[0][-1].legend(fontsize=7, loc="best")
-    if params.title:
-        fig.suptitle(params.title)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    title = params.title or f"{' and '.join(names)} against {xlabel.split(' (')[0]}"
+    fig.suptitle(title[:1].upper() + title[1:], fontsize=11)
     fig.tight_layout()
+    # one legend for all panels, beside them, so that it hides no data
+    fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=8, frameon=False)
     return ReportOutput(figures={params.name: fig})

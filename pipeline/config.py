@@ -117,6 +117,15 @@ class RawConfig(_Strict):
     stages: list[str | dict[str, dict[str, Any] | None]] = Field(min_length=1)
     reports: list[str | dict[str, dict[str, Any] | None]] = Field(default_factory=list)
     executor: ExecutorConfig = ExecutorConfig()
+    figure_format: list[Literal["png", "svg", "pdf"]] = Field(
+        default_factory=lambda: ["png"], min_length=1,
+        description="file formats of every figure (the run page shows the PNG, else the SVG; the others are linked)")
+    dpi: int = Field(150, ge=50, le=1200, description="resolution of raster figures (PNG), dots per inch")
+
+    @field_validator("figure_format", mode="before")
+    @classmethod
+    def _one_format(cls, value: Any) -> Any:
+        return [value] if isinstance(value, str) else value
 
     @field_validator("sweep")
     @classmethod
@@ -220,6 +229,8 @@ class Experiment:
             "stage_versions": {c.spec.name: c.spec.version for c in self.calls},
             "reports": [{r.name: r.params.canonical()} for r in self.reports],
             "executor": self.raw.executor.model_dump(mode="json"),
+            "figure_format": list(self.raw.figure_format),
+            "dpi": self.raw.dpi,
         }
 
     def resolve_path(self, template: str, where: str) -> Path:

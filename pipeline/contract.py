@@ -23,7 +23,7 @@ from topomatch.pipeline.params import Params
 
 __all__ = [
     "ConfigError", "InputError", "StageError", "TopomatchError", "Params", "StageResult", "StageSpec", "stage",
-    "ReportOutput", "ReportSpec", "report", "gallery_layout", "atomic_write_bytes", "atomic_write_text",
+    "ReportOutput", "ReportSpec", "report", "gallery_layout", "axis_label", "atomic_write_bytes", "atomic_write_text",
     "check_readable_file", "limit_from_env",
 ]
 
@@ -32,8 +32,11 @@ class StageResult:
     """Mixin for the named result structures (frozen dataclasses) that stages return.
 
     ``summary()`` gives the scalars that go into the run's tables, keyed by short column
-    names; the runner prefixes them with the stage label.
+    names; the runner prefixes them with the stage label. ``column_labels`` names some of them for
+    figure axes, with units (``{"area": "surface area (mesh units²)"}``).
     """
+
+    column_labels: dict[str, str] = {}
 
     def summary(self) -> dict[str, Any]:
         return {}
@@ -79,11 +82,15 @@ def stage(name: str, *, params: type[Params], version: int, consumes: tuple[str,
 
 @dataclass
 class ReportOutput:
-    """Tables (name -> rows) and figures (name -> matplotlib Figure) of one report, and notes."""
+    """Tables (name -> rows) and figures (name -> matplotlib Figure) of one report, notes, files
+    (path relative to the run folder -> bytes, e.g. exported meshes) and HTML fragments for the
+    run page (self-contained: an interactive view, whose scripts the page loads from ``assets``)."""
 
     tables: dict[str, list[dict[str, Any]]] = field(default_factory=dict)
     figures: dict[str, Any] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
+    files: dict[str, bytes] = field(default_factory=dict)
+    html: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -117,3 +124,27 @@ def gallery_layout(results, columns: int) -> tuple[int, int, list[int]]:
     cells = [inputs.index(r.input_path) * len(points) + points.index(json.dumps(r.sweep, sort_keys=True))
              for r in results]
     return len(inputs), len(points), cells
+
+
+def axis_label(experiment, results, key: str) -> str:
+    """How a figure names a sweep key or results column, with its unit.
+
+    ``stage.param`` (a sweep key): the stage's params :meth:`~Params.axis_label`; ``stage.column`` (a
+    results column): the stage result's ``column_labels``; otherwise the key in words
+    (``skeleton_cycle_rank`` -> ``skeleton cycle rank``).
+    """
+    label, _, rest = key.partition(".")
+    if rest:
+        for call in getattr(experiment, "calls", ()):
+            if call.label == label and rest in type(call.params).model_fields:
+                named = call.params.axis_label(rest)
+                if named:
+                    return named
+        for r in results:
+            value = getattr(r, "results", {}).get(label)
+            if value is not None:
+                named = getattr(type(value), "column_labels", {}).get(rest)
+                if named:
+                    return named
+                break
+    return (rest or key).replace("_", " ")

@@ -23,6 +23,13 @@ class Params(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
+    def axis_label(self, name: str) -> str | None:
+        """How figures name the parameter ``name`` with its unit (e.g. ``vertex noise σ (fraction of the
+        bounding-box diagonal)``): its field's ``title``, or None; a subclass whose unit depends on
+        another parameter overrides this."""
+        field = type(self).model_fields.get(name)
+        return field.title if field is not None else None
+
     @classmethod
     def parse(cls: type[P], data: Mapping[str, Any] | None, where: str) -> P:
         """Validate ``data`` (a YAML mapping) into ``cls``; errors name ``where``.

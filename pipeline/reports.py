@@ -1,15 +1,19 @@
-"""Running a run's reports and writing what they return: tables (CSV + JSON), figures (PNG), the run page.
+"""Running a run's reports and writing what they return: tables (CSV + JSON), figures (PNG, SVG,
+PDF), files, interactive views, and the run page.
 
 A report is a function ``func(experiment, results, params) -> ReportOutput`` marked with
 :func:`~topomatch.pipeline.contract.report` (the engine's own are in
 :mod:`topomatch.pipeline.builtin_reports`, the domains' in ``topomatch.stages.<domain>.reports``).
-Every run also writes ``tables/results.csv`` (one row per item) and ``index.html``.
+Every run also writes ``tables/results.csv`` (one row per item) and ``index.html``: a summary (what
+ran, how long, what failed), then one section per report headed by its title, with captions,
+tables that scroll sideways and numbers to four significant digits.
 """
 
 from __future__ import annotations
 
 import csv
 import html
+import inspect
 import io
 import json
 import math
@@ -20,8 +24,35 @@ from topomatch.pipeline.contract import ReportOutput
 from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text
 from topomatch.pipeline.registry import get_report
 
+#: Where reports put the scripts their interactive views need; the run page loads each once.
+ASSETS_DIR = "assets"
+
+#: Records JavaScript errors on the page (``<html data-js-errors="...">``), for people and for the
+#: headless-browser test of the run pages.
+_ERROR_HOOK = ("<script>window.addEventListener('error',function(e){var h=document.documentElement;"
+               "h.setAttribute('data-js-errors',(h.getAttribute('data-js-errors')||'')+String(e.message)+' | ')});"
+               "</script>")
+
+
+def _view_page(run_dir: Path, name: str, fragment: str) -> str:
+    """A standalone page of one interactive view (``views/NAME.html``); the run page inlines the part
+    between the view markers."""
+    scripts = "".join(f"<script src='../{ASSETS_DIR}/{html.escape(p.name)}'></script>"
+                      for p in sorted((run_dir / ASSETS_DIR).glob("*.js")))
+    return (f"<!doctype html><html lang='en'><head><meta charset='utf-8'><title>{html.escape(name)}</title>"
+            f"{_ERROR_HOOK}{scripts}</head><body>\n<!--view-->{fragment}<!--/view-->\n</body></html>")
+
 
 # --------------------------------------------------------------------------- running and writing
+
+
+def report_labels(experiment) -> list[tuple[str, Any]]:
+    """(label, call) of each configured report: its name, or ``name#k`` when the name repeats."""
+    labels: list[tuple[str, Any]] = []
+    for call in experiment.reports:
+        taken = {label for label, _ in labels}
+        labels.append((call.name if call.name not in taken else f"{call.name}#{call.index}", call))
+    return labels
 
 
 def run_reports(experiment, results) -> dict[str, ReportOutput | str]:
@@ -30,9 +61,8 @@ def run_reports(experiment, results) -> dict[str, ReportOutput | str]:
 
     matplotlib.use("Agg")
     outputs: dict[str, ReportOutput | str] = {}
-    for call in experiment.reports:
+    for label, call in report_labels(experiment):
         spec = get_report(call.name)
-        label = call.name if call.name not in outputs else f"{call.name}#{call.index}"
         try:
             outputs[label] = spec.func(experiment, results, call.params)
         except Exception as exc:  # keep the other reports and the computed results
@@ -63,8 +93,18 @@ def write_table(folder: Path, name: str, rows: list[dict[str, Any]]) -> list[str
     return [str(folder / f"{name}.csv"), str(folder / f"{name}.json")]
 
 
-def write_report_outputs(run_dir: Path, outputs: dict[str, ReportOutput | str]) -> dict[str, list[str]]:
-    """Write every table and figure; return {report label: [relative paths or error]}."""
+def _relative_file(run_dir: Path, relative: str) -> Path:
+    """``run_dir / relative`` for a file a report returned, refusing paths that leave the run folder."""
+    path = (run_dir / relative).resolve()
+    if not path.is_relative_to(run_dir.resolve()) or Path(relative).is_absolute():
+        raise ValueError(f"a report file must stay inside the run folder, got {relative!r}")
+    return path
+
+
+def write_report_outputs(run_dir: Path, outputs: dict[str, ReportOutput | str], *,
+                         figure_format: tuple[str, ...] | list[str] = ("png",), dpi: int = 150) -> dict[str, list[str]]:
+    """Write every table, figure (in each of ``figure_format``, raster ones at ``dpi``), file and
+    interactive view; return {report label: [relative paths, ``NOTE: ...`` or ``ERROR: ...``]}."""
     import matplotlib.pyplot as plt
 
     written: dict[str, list[str]] = {}
@@ -76,65 +116,196 @@ def write_report_outputs(run_dir: Path, outputs: dict[str, ReportOutput | str]) 
         for name, rows in out.tables.items():
             paths += [str(Path(p).relative_to(run_dir)) for p in write_table(run_dir / "tables", name, rows)]
         for name, fig in out.figures.items():
-            buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+            for fmt in figure_format:
+                buf = io.BytesIO()
+                fig.savefig(buf, format=fmt, dpi=dpi, bbox_inches="tight")
+                atomic_write_bytes(run_dir / "figures" / f"{name}.{fmt}", buf.getvalue())
+                paths.append(f"figures/{name}.{fmt}")
             plt.close(fig)
-            atomic_write_bytes(run_dir / "figures" / f"{name}.png", buf.getvalue())
-            paths.append(f"figures/{name}.png")
+        for relative, data in out.files.items():
+            atomic_write_bytes(_relative_file(run_dir, relative), data)
+            if not relative.startswith(f"{ASSETS_DIR}/"):
+                paths.append(relative)
+        for name, fragment in out.html.items():
+            atomic_write_text(run_dir / "views" / f"{name}.html", _view_page(run_dir, name, fragment))
+            paths.append(f"views/{name}.html")
         paths += [f"NOTE: {n}" for n in out.notes]
         written[label] = paths
     return written
 
 
-def _html_table(rows: list[dict[str, Any]], limit: int = 200) -> str:
-    if not rows:
-        return "<p><em>empty</em></p>"
+# --------------------------------------------------------------------------- the run page
+
+
+def format_number(value: float, scale: float | None = None) -> str:
+    """A float for a reader: four significant digits, plain notation from 0.001 to 1e6, else
+    scientific with three; a value below 1e-9 of its column's largest magnitude ``scale`` (rounding
+    noise such as ``1.8e-16`` next to values near 1) shows as ``0``."""
+    if not math.isfinite(value):
+        return str(value)
+    if value == 0 or (scale and abs(value) < 1e-9 * scale):
+        return "0"
+    magnitude = abs(value)
+    if 1e-3 <= magnitude < 1e6:
+        digits = max(0, 3 - int(math.floor(math.log10(magnitude))))
+        text = f"{value:.{digits}f}"
+        return text.rstrip("0").rstrip(".") if "." in text else text
+    mantissa, exponent = f"{value:.3e}".split("e")
+    mantissa = mantissa.rstrip("0").rstrip(".")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def _columns(rows: list[dict[str, Any]]) -> list[str]:
     columns: list[str] = []
     for row in rows:
         columns.extend(c for c in row if c not in columns)
+    return columns
 
-    def fmt(v: Any) -> str:
+
+def html_table(rows: list[dict[str, Any]], limit: int = 200) -> str:
+    """An HTML table of ``rows`` in a box that scrolls sideways, numbers formatted per column."""
+    if not rows:
+        return "<p><em>empty</em></p>"
+    columns = _columns(rows)
+    scales = {c: max((abs(r[c]) for r in rows if isinstance(r.get(c), float) and math.isfinite(r[c])), default=0.0)
+              for c in columns}
+
+    def fmt(column: str, v: Any) -> str:
+        if isinstance(v, bool) or v is None:
+            return "" if v is None else str(v)
         if isinstance(v, float):
-            return f"{v:.6g}"
+            return format_number(v, scales[column])
         return html.escape(str(_cell(v)))
 
     head = "".join(f"<th>{html.escape(c)}</th>" for c in columns)
-    body = "".join(
-        "<tr>" + "".join(f"<td>{fmt(r.get(c, ''))}</td>" for c in columns) + "</tr>" for r in rows[:limit]
-    )
+    body = "".join("<tr>" + "".join(
+        f"<td class='num'>{fmt(c, r.get(c, ''))}</td>" if isinstance(r.get(c), (int, float)) and not isinstance(r.get(c), bool)
+        else f"<td>{fmt(c, r.get(c, ''))}</td>" for c in columns) + "</tr>" for r in rows[:limit])
     more = f"<p>... {len(rows) - limit} more rows in the CSV</p>" if len(rows) > limit else ""
-    return f"<table><tr>{head}</tr>{body}</table>{more}"
+    return f"<div class='scroll'><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>{more}"
+
+
+def humanise(name: str) -> str:
+    """A file or key name as words: ``skeleton_vs_noise`` -> ``Skeleton vs noise``."""
+    words = " ".join("3D" if w.lower() == "3d" else w for w in name.replace("_", " ").replace("-", " ").split())
+    return words[:1].upper() + words[1:]
+
+
+def report_heading(call) -> tuple[str, str]:
+    """(title, caption) of a report: its ``title`` parameter or its name in words, and the report's doc."""
+    title = getattr(call.params, "title", "") or ""
+    name = getattr(call.params, "name", "") or getattr(call.params, "folder", "") or call.name
+    doc = " ".join((inspect.getdoc(get_report(call.name).func) or "").split("\n\n")[0].split()).replace("``", "")
+    return (title or humanise(name)), doc
+
+
+_STYLE = """
+body{font-family:system-ui,sans-serif;margin:2em auto;max-width:1400px;padding:0 1em;color:#222;line-height:1.4}
+h1{margin-bottom:.2em} h2{border-bottom:1px solid #ddd;padding-bottom:.2em;margin-top:2em}
+.kind{color:#888;font-size:.7em;font-weight:normal}
+.summary{background:#f6f8fa;border:1px solid #ddd;border-radius:6px;padding:.6em 1em}
+.summary dt{font-weight:600;float:left;clear:left;width:9em} .summary dd{margin-left:9.5em}
+.scroll{overflow-x:auto;max-width:100%;margin:.5em 0}
+table{border-collapse:collapse;font-size:12px} td,th{border:1px solid #ccc;padding:2px 6px;white-space:nowrap}
+th{background:#f0f0f0;position:sticky;top:0} td.num{text-align:right;font-variant-numeric:tabular-nums}
+figure{margin:1em 0} figure img{max-width:100%;border:1px solid #eee} figcaption{color:#555;font-size:.9em}
+.err{color:#b00} .ok{color:#070} nav ul{columns:2}
+"""
+
+
+def _summary(experiment, results, manifest: dict) -> str:
+    esc = html.escape
+    n_failed = manifest["n_failed"]
+    stages = " &rarr; ".join(esc(c.label) for c in experiment.calls)
+    sweep = "; ".join(f"{esc(k)}: {esc(', '.join(map(str, v)))}" for k, v in experiment.raw.sweep.items()) or "none"
+    status = (f"<span class='err'>{n_failed} of {manifest['n_items']} items failed</span> (listed below)"
+              if n_failed else f"<span class='ok'>all {manifest['n_items']} items ok</span>")
+    reports = ", ".join(esc(call.name) for call in experiment.reports) or "none"
+    return (
+        "<dl class='summary'>"
+        f"<dt>Status</dt><dd>{status}</dd>"
+        f"<dt>Inputs</dt><dd>{len(experiment.inputs)} &times; {len(experiment.sweep_points())} sweep points "
+        f"= {manifest['n_items']} items</dd>"
+        f"<dt>Sweep</dt><dd>{sweep}</dd><dt>Stages</dt><dd>{stages}</dd><dt>Reports</dt><dd>{reports}</dd>"
+        f"<dt>Time</dt><dd>{manifest['seconds']['compute']:.1f} s computing, {manifest['seconds']['total']:.1f} s "
+        f"in all; started {esc(manifest['started'])}; cache hits {manifest['cache']['hits']} of "
+        f"{manifest['cache']['stage_results']} stage results</dd>"
+        f"<dt>Files</dt><dd><a href='config.yaml'>config.yaml</a> (hash <code>{esc(manifest['config_hash'])}</code>) "
+        f"&middot; <a href='manifest.json'>manifest.json</a> &middot; <a href='tables/results.csv'>results.csv</a></dd>"
+        "</dl>")
+
+
+def _figure_paths(paths: list[str]) -> dict[str, list[str]]:
+    """Figure stem -> its files in every format, in order."""
+    out: dict[str, list[str]] = {}
+    for p in paths:
+        if p.startswith("figures/"):
+            out.setdefault(str(Path(p).with_suffix("")), []).append(p)
+    return out
+
+
+def _section(run_dir: Path, label: str, call, paths: list[str], number: int, figures: list[int]) -> str:
+    """One report's section; ``figures`` holds the running figure count (updated)."""
+    esc = html.escape
+    title, caption = report_heading(call) if call is not None else (humanise(label), "")
+    parts = [f"<h2 id='r{number}'>{esc(title)} <span class='kind'>({esc(label)})</span></h2>"]
+    if caption:
+        parts.append(f"<p>{esc(caption)}</p>")
+    for p in paths:
+        if p.startswith("ERROR: "):
+            parts.append(f"<p class='err'>{esc(p)}</p>")
+        elif p.startswith("NOTE: "):
+            parts.append(f"<p>{esc(p[6:])}</p>")
+    for stem, files in _figure_paths(paths).items():
+        figures[0] += 1
+        shown = next((f for f in files if f.endswith((".png", ".svg"))), None)
+        links = " &middot; ".join(f"<a href='{esc(f)}'>{esc(Path(f).suffix[1:].upper())}</a>" for f in files)
+        name = humanise(Path(stem).name)
+        image = f"<img src='{esc(shown)}' alt='{esc(name)}'>" if shown else ""
+        parts.append(f"<figure>{image}<figcaption>Figure {figures[0]}: {esc(name)}. {esc(caption)} "
+                     f"Files: {links}</figcaption></figure>")
+    for p in paths:
+        if p.startswith("views/"):
+            page = (run_dir / p).read_text()
+            parts.append(page[page.index("<!--view-->") + 11:page.index("<!--/view-->")]
+                         + f"<p class='kind'><a href='{esc(p)}'>open this view on its own page</a></p>")
+        elif p.endswith(".csv"):
+            rows = json.loads((run_dir / p.replace(".csv", ".json")).read_text())
+            parts.append(f"<h3>Table: {esc(humanise(Path(p).stem))} <span class='kind'>(<a href='{esc(p)}'>CSV</a>, "
+                         f"{len(rows)} rows)</span></h3>" + html_table(rows))
+    others = [p for p in paths if not p.startswith(("ERROR: ", "NOTE: ", "figures/", "views/", "tables/"))]
+    if others:
+        parts.append(f"<details><summary>{len(others)} files written</summary><ul>"
+                     + "".join(f"<li><a href='{esc(p)}'>{esc(p)}</a></li>" for p in others) + "</ul></details>")
+    return "\n".join(parts)
 
 
 def write_index_html(run_dir: Path, experiment, results, manifest: dict, written: dict[str, list[str]]) -> None:
-    """A single page with the run's summary, figures and tables."""
+    """A single page with the run's summary, then each report's figures, views and tables, then all items."""
     esc = html.escape
+    calls = dict(report_labels(experiment))
+    scripts = sorted(p.relative_to(run_dir).as_posix() for p in (run_dir / ASSETS_DIR).glob("*.js")) \
+        if (run_dir / ASSETS_DIR).is_dir() else []
     parts = [
-        "<!doctype html><meta charset='utf-8'>",
-        f"<title>{esc(experiment.name)}</title>",
-        "<style>body{font-family:sans-serif;margin:2em;max-width:1400px}table{border-collapse:collapse;"
-        "font-size:12px}td,th{border:1px solid #ccc;padding:2px 6px}img{max-width:100%;border:1px solid #eee}"
-        ".err{color:#b00}</style>",
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
+        f"<title>{esc(experiment.name)}</title><style>{_STYLE}</style>{_ERROR_HOOK}",
+        *(f"<script src='{esc(s)}'></script>" for s in scripts),
+        "</head><body>",
         f"<h1>{esc(experiment.name)}</h1><p>{esc(experiment.raw.description)}</p>",
-        f"<p>{manifest['n_items']} items, {manifest['n_failed']} failed; compute {manifest['seconds']['compute']:.2f} s; "
-        f"cache hits {manifest['cache']['hits']}/{manifest['cache']['stage_results']}; config hash "
-        f"<code>{manifest['config_hash']}</code>. <a href='config.yaml'>config</a> · "
-        f"<a href='manifest.json'>manifest</a> · <a href='tables/results.csv'>results.csv</a></p>",
+        _summary(experiment, results, manifest),
     ]
     failed = [r for r in results if not r.ok]
     if failed:
         parts.append("<h2>Failed items</h2><ul>" + "".join(f"<li class='err'>{esc(r.error or '')}</li>" for r in failed) + "</ul>")
-    for label, paths in written.items():
-        parts.append(f"<h2>{esc(label)}</h2>")
-        for p in paths:
-            if p.startswith("ERROR: "):
-                parts.append(f"<p class='err'>{esc(p)}</p>")
-            elif p.startswith("NOTE: "):
-                parts.append(f"<p>{esc(p[6:])}</p>")
-            elif p.endswith(".png"):
-                parts.append(f"<p><img src='{esc(p)}' alt='{esc(p)}'></p>")
-            elif p.endswith(".csv"):
-                rows = json.loads((run_dir / p.replace(".csv", ".json")).read_text())
-                parts.append(f"<h3><a href='{esc(p)}'>{esc(Path(p).name)}</a></h3>" + _html_table(rows))
-    parts.append("<h2>All items</h2>" + _html_table([r.row() for r in results]))
+    sections = list(written.items())
+    if len(sections) > 1:
+        parts.append("<nav><h2>Contents</h2><ul>" + "".join(
+            f"<li><a href='#r{i}'>{esc(report_heading(calls[label])[0] if label in calls else humanise(label))}</a></li>"
+            for i, (label, _) in enumerate(sections, 1)) + "<li><a href='#items'>All items</a></li></ul></nav>")
+    figures = [0]
+    for i, (label, paths) in enumerate(sections, 1):
+        parts.append(_section(run_dir, label, calls.get(label), paths, i, figures))
+    parts.append("<h2 id='items'>All items</h2><p>One row per input and sweep point: the summary of every stage "
+                 "(<a href='tables/results.csv'>CSV</a>).</p>" + html_table([r.row() for r in results]))
+    parts.append("</body></html>")
     atomic_write_text(run_dir / "index.html", "\n".join(parts))

@@ -106,7 +106,8 @@ def run_experiment(
 
     write_table(run_dir / "tables", "results", [r.row() for r in results])
     outputs = run_reports(experiment, results)
-    written = write_report_outputs(run_dir, outputs)
+    written = write_report_outputs(run_dir, outputs, figure_format=experiment.raw.figure_format,
+                                   dpi=experiment.raw.dpi)
     manifest = build_manifest(
         experiment, results, started=started, compute_seconds=compute_seconds,
         total_seconds=time.perf_counter() - t0, cache_root=cache_root, outputs=written,

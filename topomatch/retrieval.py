@@ -96,17 +96,27 @@ class MatchResult:
     """The dissimilarity of two meshes, with the fields ``topomatch match --json`` prints.
 
     ``correspondence`` (endpoint methods only): one entry per matched endpoint pair, ``a`` and ``b``
-    (endpoint indices), ``cost`` (Phi) and both endpoints' features; ``endpoints_a``/``endpoints_b``
-    the endpoint counts (None for vector methods).
+    (endpoint indices), ``cost`` (Phi) and both endpoints' features; ``n_endpoints_a``/``n_endpoints_b``
+    the endpoint counts (None for vector methods; named like ``Skeleton.n_endpoints``, docs/cli_json.md).
     """
 
     a: str
     b: str
     method: str
     dissimilarity: float
-    endpoints_a: int | None = None
-    endpoints_b: int | None = None
+    n_endpoints_a: int | None = None
+    n_endpoints_b: int | None = None
     correspondence: list[dict[str, Any]] | None = None
+
+    @property
+    def endpoints_a(self) -> int | None:
+        """Deprecated Python alias of :attr:`n_endpoints_a` (the JSON has only the new name)."""
+        return self.n_endpoints_a
+
+    @property
+    def endpoints_b(self) -> int | None:
+        """Deprecated Python alias of :attr:`n_endpoints_b`."""
+        return self.n_endpoints_b
 
     def to_dict(self) -> dict[str, Any]:
         return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
@@ -296,19 +306,24 @@ def _first_clean(result: ItemResult) -> Any:
 class QueryResult:
     """The ranked closest shapes to a query, with the fields ``topomatch query --json`` prints.
 
-    ``results``: one entry per shape, ``rank``, ``path``, ``label``, ``dissimilarity``, ``endpoints``
-    (its endpoint count, or None); ``endpoints``: the query's endpoint count (or None); ``seconds``:
+    ``results``: one entry per shape, ``rank``, ``path``, ``label``, ``dissimilarity``, ``n_endpoints``
+    (its endpoint count, or None); ``n_endpoints``: the query's endpoint count (or None); ``seconds``:
     ``descriptor`` and ``ranking``; ``indexed``: the shapes ranked; ``fusion`` (fused methods): the
     parts kept and dropped by the screening, their agreement and the re-ranking neighbours.
     """
 
     query: str
     method: str
-    endpoints: int | None
+    n_endpoints: int | None
     indexed: int
     seconds: dict[str, float]
     results: list[dict[str, Any]]
     fusion: dict[str, Any] | None = None
+
+    @property
+    def endpoints(self) -> int | None:
+        """Deprecated Python alias of :attr:`n_endpoints` (the JSON has only the new name)."""
+        return self.n_endpoints
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -425,7 +440,7 @@ class Collection:
         t_rank = time.perf_counter() - t
         endpoints = next((q.n_endpoints for q in query.values() if q.n_endpoints is not None), None)
         results = [{"rank": i + 1, "path": rows[j].path, "label": rows[j].label, "dissimilarity": float(d[j]),
-                    "endpoints": rows[j].n_endpoints} for i, j in enumerate(order) if np.isfinite(d[j])]
+                    "n_endpoints": rows[j].n_endpoints} for i, j in enumerate(order) if np.isfinite(d[j])]
         return QueryResult(str(mesh), method, endpoints, len(rows), {"descriptor": t_desc, "ranking": t_rank},
                            results, decision)
 

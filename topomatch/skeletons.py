@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from topomatch.pipeline.config import chain_with
-from topomatch.pipeline.errors import StageError
+from topomatch.pipeline.errors import ConfigError, StageError
 from topomatch.pipeline.files import atomic_write_bytes
 from topomatch.pipeline.item import ItemResult, run_stages
 from topomatch.stages.mesh.mesh import Mesh
@@ -144,30 +144,46 @@ def skeleton_with(mesh: Mesh | str | Path, overrides: dict[str, dict[str, Any]])
         values=morse.function.values, item=result)
 
 
-def write_skeleton_files(result: Skeleton, out: str | Path) -> list[str]:
-    """Write ``skeleton.graphml``, ``skeleton.json``, ``skeleton.obj`` (polyline), ``reeb.graphml`` and
-    ``skeleton.png`` into ``out``; return their paths."""
+def write_skeleton_files(result: Skeleton, out: str | Path, formats: tuple[str, ...] | list[str] = ("ply",), *,
+                         figure: bool = True) -> list[str]:
+    """Write the skeleton and the unpruned Reeb graph in each of ``formats`` (``skeleton.ply``,
+    ``reeb.ply``, ...: PLY polylines by default, also ``obj``, ``graphml``, ``json``; see
+    :mod:`topomatch.stages.reeb.export`) and, with ``figure``, ``skeleton.png`` into ``out``; return
+    their paths."""
+    from topomatch.stages.reeb.export import SKELETON_FORMATS, write_skeleton
+
+    unknown = [f for f in formats if f not in SKELETON_FORMATS]
+    if unknown or not formats:
+        raise ConfigError(f"skeleton file formats must be among {', '.join(SKELETON_FORMATS)}, got "
+                          f"{', '.join(map(str, unknown)) or 'none'}")
+    out = Path(out)
+    paths = []
+    for fmt in dict.fromkeys(formats):
+        for name, graph in (("skeleton", result.graph), ("reeb", result.reeb.graph)):
+            paths.append(out / f"{name}.{fmt}")
+            write_skeleton(graph, paths[-1])
+    if figure:
+        paths.append(out / "skeleton.png")
+        atomic_write_bytes(paths[-1], skeleton_png(result))
+    return [str(p) for p in paths]
+
+
+def skeleton_png(result: Skeleton, *, dpi: int = 150) -> bytes:
+    """The skeleton over its mesh (coloured by the Morse function, endpoints and root marked) as PNG bytes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from topomatch.stages.reeb.export import write_graphml, write_json, write_polyline
-    from topomatch.stages.reeb.reports import SkeletonGalleryParams, draw_item
+    from topomatch.stages.reeb.reports import FUNCTION_NAMES, SkeletonGalleryParams, add_skeleton_keys, draw_item
 
-    out = Path(out)
-    paths = [out / "skeleton.graphml", out / "skeleton.json", out / "skeleton.obj", out / "reeb.graphml",
-             out / "skeleton.png"]
-    write_graphml(result.graph, paths[0])
-    write_json(result.graph, paths[1])
-    write_polyline(result.graph, paths[2])
-    write_graphml(result.reeb.graph, paths[3])
-    fig = plt.figure(figsize=(6, 6))
-    ax = fig.add_subplot(projection="3d")
+    fig = plt.figure(figsize=(6, 6.8))
+    ax = fig.add_axes([0.02, 0.16, 0.96, 0.76])
     caption = draw_item(ax, result.item, SkeletonGalleryParams())
-    ax.set_title(f"{Path(result.mesh).name} ({result.function}, N={result.levels})\n{caption}", fontsize=9)
+    name = FUNCTION_NAMES.get(result.function, result.function)
+    ax.set_title(f"Skeleton of {Path(result.mesh).name} ({name}, {result.levels} levels)\n{caption}", fontsize=9)
+    add_skeleton_keys(fig, isolines=True, functions={result.function}, root="root" in result.graph)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=120, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=dpi, bbox_inches="tight")
     plt.close(fig)
-    atomic_write_bytes(paths[4], buf.getvalue())
-    return [str(p) for p in paths]
+    return buf.getvalue()

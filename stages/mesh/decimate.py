@@ -53,7 +53,7 @@ _FAST_SIMPLIFICATION_LOCK = threading.Lock()
 class DecimateParams(Params):
     """Parameters of :func:`decimate`: exactly one of ``target_faces`` and ``ratio``."""
 
-    target_faces: int | None = Field(None, ge=4, description="number of faces to keep (at least 4, a tetrahedron)")
+    target_faces: int | None = Field(None, ge=4, title="faces after decimation", description="number of faces to keep (at least 4, a tetrahedron)")
     ratio: float | None = Field(None, gt=0, le=1, allow_inf_nan=False,
                                 description="fraction of the faces to keep, in (0, 1]")
     aggressiveness: float = Field(7.0, gt=0, le=20, allow_inf_nan=False,

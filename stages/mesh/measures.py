@@ -9,6 +9,7 @@ undirected edges (``igl.edges``), so interior edges are not counted twice.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import ClassVar
 
 import numpy as np
 
@@ -131,6 +132,12 @@ class MeasuresParams(Params):
 @dataclass(frozen=True, eq=False)
 class MeasuresResult(StageResult):
     """The measures of the current mesh (the mesh itself passes through unchanged)."""
+
+    column_labels: ClassVar[dict[str, str]] = {
+        "area": "surface area (mesh units²)", "area_open3d": "surface area by open3d (mesh units²)",
+        "bbox_diagonal": "bounding-box diagonal (mesh units)", "edge_mean": "mean edge length (mesh units)",
+        "edge_min": "shortest edge (mesh units)", "edge_max": "longest edge (mesh units)",
+        "vertices": "vertices", "faces": "faces", "edges": "edges"}
 
     measures: MeshMeasures
 

@@ -32,6 +32,13 @@ class NoiseParams(Params):
         "bbox_diagonal", description="unit of sigma: mean edge length, bounding-box diagonal, or absolute")
     seed: int = Field(0, ge=0, description="seed of numpy.random.default_rng")
 
+    def axis_label(self, name: str) -> str | None:
+        if name == "sigma":
+            unit = {"mean_edge": "× mean edge length", "bbox_diagonal": "× bounding-box diagonal",
+                    "absolute": "mesh units"}[self.relative_to]
+            return f"vertex noise σ ({unit})"
+        return super().axis_label(name)
+
 
 @dataclass(frozen=True, eq=False)
 class NoiseResult(StageResult):

@@ -25,14 +25,12 @@ def z_up(mesh: Mesh, up: str) -> Mesh:
     return Mesh(mesh.V[:, list(UP_ORDER[up])], mesh.F, mesh.name)
 
 
-def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "viridis",
-              color=(0.75, 0.78, 0.85), elev: float = 20.0, azim: float = -60.0, alpha: float = 1.0) -> None:
-    """Draw ``mesh`` on a 3D axis, shaded; ``values`` (n,) colours it by a vertex function."""
+def face_colors(V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = None, cmap: str = "viridis",
+                color=(0.75, 0.78, 0.85)) -> np.ndarray:
+    """Shaded face colours (m, 3): ``values`` (n,) through ``cmap`` from its minimum to its maximum
+    (face means), or the plain ``color``, times the Lambert shading."""
     from matplotlib import colormaps
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    V, F = mesh.V, mesh.F
-    shade = face_shading(V, F)[:, None]
     if values is not None:
         v = np.asarray(values, dtype=float)[F].mean(axis=1)
         span = np.ptp(v)
@@ -40,7 +38,16 @@ def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "
         base = colormaps[cmap](t)[:, :3]
     else:
         base = np.broadcast_to(np.asarray(color, dtype=float), (len(F), 3))
-    rgb = np.clip(base * shade, 0, 1)
+    return np.clip(base * face_shading(V, F)[:, None], 0, 1)
+
+
+def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "viridis",
+              color=(0.75, 0.78, 0.85), elev: float = 20.0, azim: float = -60.0, alpha: float = 1.0) -> None:
+    """Draw ``mesh`` on a 3D axis, shaded; ``values`` (n,) colours it by a vertex function."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    V, F = mesh.V, mesh.F
+    rgb = face_colors(V, F, values=values, cmap=cmap, color=color)
     poly = Poly3DCollection(V[F], facecolors=rgb, edgecolors="none", linewidths=0, alpha=alpha)
     ax.add_collection3d(poly)
     lo, hi = V.min(axis=0), V.max(axis=0)

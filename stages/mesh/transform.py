@@ -29,7 +29,7 @@ class TransformParams(Params):
 
     axis: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
         (0.0, 0.0, 1.0), description="rotation axis (any non-zero length; normalised)")
-    angle_deg: FiniteFloat = Field(0.0, description="rotation angle in degrees (right-hand rule about axis)")
+    angle_deg: FiniteFloat = Field(0.0, title="rotation angle (degrees)", description="rotation angle in degrees (right-hand rule about axis)")
     scale: float = Field(1.0, gt=0, allow_inf_nan=False, description="uniform scale factor s > 0")
     translation: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
         (0.0, 0.0, 0.0), description="translation t added after rotation and scale")

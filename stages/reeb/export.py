@@ -1,8 +1,14 @@
-"""Writing skeletons: GraphML, JSON (networkx node-link) and PLY / OBJ polylines.
+"""Writing skeletons: PLY / OBJ polylines, GraphML and JSON (networkx node-link).
 
-Node ids are written as strings ("0", "1", ..., "root"); ``pos`` becomes
-``x, y, z``; ``members`` (vertex ids) becomes a space-separated string in
-GraphML and a list in JSON.
+The PLY polyline (the default of ``topomatch skeleton --out``) has a ``vertex`` element (x, y, z)
+and an ``edge`` element (vertex1, vertex2): open3d's ``read_line_set`` and trimesh (a ``Path3D``)
+load it with its edges. OBJ ``l`` lines are kept for tools that want OBJ, but open3d reads them as
+a line set with no lines and trimesh as a point cloud.
+
+Node ids are written as strings ("0", "1", ..., "root"); ``pos`` becomes ``x, y, z``; ``members``
+(vertex ids) becomes a space-separated string in GraphML and a list in JSON. In the polylines the
+vertices are the graph's nodes in networkx order, so a node's row is its position in
+:func:`polyline`'s node list.
 """
 
 from __future__ import annotations
@@ -14,6 +20,9 @@ import networkx as nx
 import numpy as np
 
 from topomatch.pipeline.contract import atomic_write_text
+
+#: The skeleton file formats, by file suffix (the default, PLY, first).
+SKELETON_FORMATS = ("ply", "obj", "graphml", "json")
 
 
 def _flat_graph(G: nx.MultiGraph, *, members_as_text: bool) -> nx.MultiGraph:
@@ -28,19 +37,9 @@ def _flat_graph(G: nx.MultiGraph, *, members_as_text: bool) -> nx.MultiGraph:
     return H
 
 
-def write_graphml(G: nx.MultiGraph, path: str | Path) -> None:
-    """GraphML with scalar node attributes (readable by networkx, Gephi, yEd)."""
-    text = "\n".join(nx.generate_graphml(_flat_graph(G, members_as_text=True)))
-    atomic_write_text(path, text + "\n")
-
-
 def graph_to_json(G: nx.MultiGraph) -> dict:
     """networkx node-link data (``edges="edges"``) of the flattened graph."""
     return nx.node_link_data(_flat_graph(G, members_as_text=False), edges="edges")
-
-
-def write_json(G: nx.MultiGraph, path: str | Path) -> None:
-    atomic_write_text(path, json.dumps(graph_to_json(G)))
 
 
 def polyline(G: nx.MultiGraph) -> tuple[np.ndarray, np.ndarray, list]:
@@ -52,19 +51,49 @@ def polyline(G: nx.MultiGraph) -> tuple[np.ndarray, np.ndarray, list]:
     return P, E, nodes
 
 
-def write_polyline(G: nx.MultiGraph, path: str | Path) -> None:
-    """The skeleton as an OBJ (``v`` + ``l`` lines) or ASCII PLY (vertex + edge elements)."""
-    path = Path(path)
+def skeleton_text(G: nx.MultiGraph, fmt: str) -> str:
+    """The skeleton as the text of a ``fmt`` file (one of :data:`SKELETON_FORMATS`)."""
+    if fmt == "graphml":
+        return "\n".join(nx.generate_graphml(_flat_graph(G, members_as_text=True))) + "\n"
+    if fmt == "json":
+        return json.dumps(graph_to_json(G))
     P, E, _ = polyline(G)
-    if path.suffix.lower() == ".obj":
+    if fmt == "obj":
         lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in P]
         lines += [f"l {a + 1} {b + 1}" for a, b in E]
-    elif path.suffix.lower() == ".ply":
-        lines = ["ply", "format ascii 1.0", f"element vertex {len(P)}", "property double x", "property double y",
-                 "property double z", f"element edge {len(E)}", "property int vertex1", "property int vertex2",
-                 "end_header"]
+    elif fmt == "ply":
+        lines = ["ply", "format ascii 1.0", "comment topomatch skeleton: nodes and edges of a Reeb graph",
+                 f"element vertex {len(P)}", "property double x", "property double y", "property double z",
+                 f"element edge {len(E)}", "property int vertex1", "property int vertex2", "end_header"]
         lines += [f"{x:.17g} {y:.17g} {z:.17g}" for x, y, z in P]
         lines += [f"{a} {b}" for a, b in E]
     else:
+        raise ValueError(f"skeleton format must be one of {', '.join(SKELETON_FORMATS)}, got {fmt!r}")
+    return "\n".join(lines) + "\n"
+
+
+def write_skeleton(G: nx.MultiGraph, path: str | Path) -> None:
+    """Write the skeleton in the format its suffix names (.ply, .obj, .graphml, .json)."""
+    path = Path(path)
+    fmt = path.suffix.lower().lstrip(".")
+    if fmt not in SKELETON_FORMATS:
+        raise ValueError(f"{path}: a skeleton file must end in one of "
+                         f"{', '.join('.' + f for f in SKELETON_FORMATS)}")
+    atomic_write_text(path, skeleton_text(G, fmt))
+
+
+def write_graphml(G: nx.MultiGraph, path: str | Path) -> None:
+    """GraphML with scalar node attributes (readable by networkx, Gephi, yEd)."""
+    atomic_write_text(path, skeleton_text(G, "graphml"))
+
+
+def write_json(G: nx.MultiGraph, path: str | Path) -> None:
+    atomic_write_text(path, skeleton_text(G, "json"))
+
+
+def write_polyline(G: nx.MultiGraph, path: str | Path) -> None:
+    """The skeleton as an ASCII PLY (vertex + edge elements) or OBJ (``v`` + ``l`` lines) polyline."""
+    path = Path(path)
+    if path.suffix.lower() not in (".obj", ".ply"):
         raise ValueError(f"{path}: polyline format must be .obj or .ply")
-    atomic_write_text(path, "\n".join(lines) + "\n")
+    write_skeleton(G, path)

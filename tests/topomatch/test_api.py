@@ -57,9 +57,11 @@ def test_skeleton_options_and_errors(tmp_path):
         topomatch.skeleton(BUNDLED_MESHES / "torus.off", levels=1)
     with pytest.raises(topomatch.InputError, match="none.off: file not found"):
         topomatch.skeleton(tmp_path / "none.off")
-    files = topomatch.write_skeleton_files(s, tmp_path / "out")
-    assert all((tmp_path / "out" / name).is_file() for name in ("skeleton.graphml", "skeleton.png"))
+    files = topomatch.write_skeleton_files(s, tmp_path / "out", ["ply", "graphml"])
+    assert all((tmp_path / "out" / name).is_file() for name in ("skeleton.ply", "skeleton.graphml", "skeleton.png"))
     assert len(files) == 5
+    with pytest.raises(topomatch.ConfigError, match="formats must be among ply, obj, graphml, json, got stl"):
+        topomatch.write_skeleton_files(s, tmp_path / "out", ["stl"])
 
 
 def test_a_non_manifold_mesh_is_skeletonised_with_a_warning(capsys):

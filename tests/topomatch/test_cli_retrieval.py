@@ -99,12 +99,12 @@ def test_match_prints_correspondence(capsys):
     code, out, _ = run(capsys, "match", BUNDLED_MESHES / "odedstein_human_man.obj.gz",
                        BUNDLED_MESHES / "odedstein_human_woman.obj.gz", "--method", "rgpd", "--json")
     result = json.loads(out)
-    assert code == 0 and result["endpoints_a"] >= 5 and result["endpoints_b"] >= 5
-    assert len(result["correspondence"]) == min(result["endpoints_a"], result["endpoints_b"])
+    assert code == 0 and result["n_endpoints_a"] >= 5 and result["n_endpoints_b"] >= 5
+    assert len(result["correspondence"]) == min(result["n_endpoints_a"], result["n_endpoints_b"])
     # the method's own unmatched cost (the catalogue's, 0.3 for rgpd) for each endpoint left without a partner
     from topomatch.stages.retrieval.catalogue import get_method
 
-    unmatched = abs(result["endpoints_a"] - result["endpoints_b"])
+    unmatched = abs(result["n_endpoints_a"] - result["n_endpoints_b"])
     cost = get_method("rgpd").unmatched_cost
     assert cost > 0 and result["dissimilarity"] == pytest.approx(sum(p["cost"] for p in result["correspondence"])
                                                                  + cost * unmatched)

@@ -31,14 +31,28 @@ def test_json_fields(capsys, name, genus):
 
 
 def test_outputs_written(capsys, tmp_path):
+    import open3d as o3d
+
     code, out, _ = skeleton_json(capsys, BUNDLED_MESHES / "odedstein_fish_low_resolution.obj.gz",
-                                 "--function", "mixture", "--out", tmp_path)
+                                 "--function", "mixture", "--out", tmp_path, "--format", "ply,graphml")
     assert code == 0
+    assert sorted(p.rsplit("/", 1)[-1] for p in out["files"]) == sorted(
+        ["skeleton.ply", "reeb.ply", "skeleton.graphml", "reeb.graphml", "skeleton.png"])
+    ls = o3d.io.read_line_set(str(tmp_path / "skeleton.ply"))
+    assert (len(ls.points), len(ls.lines)) == (out["n_nodes"], out["n_edges"])
     G = nx.read_graphml(tmp_path / "skeleton.graphml", force_multigraph=True)
     assert G.number_of_nodes() == out["n_nodes"]
     ends = [v for v in G if v != "root" and G.degree(v) == 1]
     assert len(ends) == out["n_endpoints"]
     assert (tmp_path / "skeleton.png").stat().st_size > 10_000
+
+
+def test_default_output_is_a_ply_polyline_and_bad_formats_are_usage_errors(capsys, tmp_path):
+    code, out, _ = skeleton_json(capsys, BUNDLED_MESHES / "torus.off", "--function", "mixture", "--out", tmp_path)
+    assert code == 0 and sorted(p.rsplit("/", 1)[-1] for p in out["files"]) == ["reeb.ply", "skeleton.ply", "skeleton.png"]
+    with pytest.raises(SystemExit) as exc:
+        main(["skeleton", str(BUNDLED_MESHES / "torus.off"), "--format", "stl"])
+    assert exc.value.code == 2 and "expected formats among ply, obj, graphml, json, got 'stl'" in capsys.readouterr().err
 
 
 def _write(tmp_path, name, V, F):

@@ -1,12 +1,58 @@
 """What the command modules share: declaring a command whose options are built only when it runs,
-and printing a result as one JSON object (``--json``) or aligned ``key: value`` lines."""
+the global verbosity (``-v``/``-q``), messages on stderr, and printing a result as one JSON object
+(``--json``, the schema in ``topomatch/cli/schema.json``) or aligned ``key: value`` lines."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import math
+import sys
+from pathlib import Path
 from typing import Any, Callable, Iterable
+
+#: The JSON Schema of every command's ``--json`` output and of the error object (docs/cli_json.md).
+SCHEMA_PATH = Path(__file__).with_name("schema.json")
+
+
+class _State:
+    """Per-invocation state of the command line, reset by :func:`topomatch.cli.main`."""
+
+    verbosity = 0  # -1 quiet (errors only), 0 normal, 1 verbose (-v), 2 debug logging (-vv)
+    json_printed = False  # a --json result object is already on stdout (an error then goes to stderr only)
+
+
+STATE = _State()
+
+
+def reset(verbosity: int = 0) -> None:
+    """Start an invocation with ``verbosity`` and no JSON printed yet."""
+    STATE.verbosity = verbosity
+    STATE.json_printed = False
+
+
+def verbosity() -> int:
+    """-1 with ``-q``, 0 by default, 1 with ``-v``, 2 with ``-vv``."""
+    return STATE.verbosity
+
+
+def info(message: str, *, level: int = 0) -> None:
+    """Print ``message`` on stderr when the verbosity is at least ``level`` (0: unless ``-q``; 1: ``-v``)."""
+    if STATE.verbosity >= level:
+        print(message, file=sys.stderr)
+
+
+def warn(message: str) -> None:
+    """``topomatch: warning: message`` on stderr, unless ``-q``."""
+    info(f"topomatch: warning: {message}", level=0)
+
+
+def add_verbosity_options(p: argparse.ArgumentParser, *, default: Any = argparse.SUPPRESS) -> None:
+    """``-v/--verbose`` (repeatable) and ``-q/--quiet``: accepted before the command and after it."""
+    p.add_argument("-v", "--verbose", action="count", default=default,
+                   help="say more on stderr: every output file, per-stage times; -vv adds debug logging")
+    p.add_argument("-q", "--quiet", action="store_true", default=default,
+                   help="print only the result and errors: no progress bars, notes or warnings")
 
 
 def command(sub, name: str, *, help: str, description: str, handler: Callable[[argparse.Namespace], int],
@@ -16,6 +62,7 @@ def command(sub, name: str, *, help: str, description: str, handler: Callable[[a
     models imports the stages, which ``topomatch --help`` and the other commands need not pay for."""
     p = sub.add_parser(name, help=help, description=description)
     p.set_defaults(handler=handler)
+    add_verbosity_options(p)
     if getattr(sub, "selected", None) in (None, name):
         build(p)
 
@@ -44,13 +91,39 @@ def to_json(value: Any, **kwargs) -> str:
     return json.dumps(_finite(value), allow_nan=False, **kwargs)
 
 
+def print_json(value: Any, **kwargs) -> None:
+    """Print a command's ``--json`` result (one object on stdout)."""
+    print(to_json(value, **kwargs))
+    STATE.json_printed = True
+
+
 def print_result(summary: dict[str, Any], *, as_json: bool, keys: Iterable[str] | None = None) -> None:
     """Print ``summary`` as one JSON object, or as ``key: value`` lines (only ``keys``, in their order,
     leaving out empty values, when given)."""
     if as_json:
-        print(to_json(summary))
+        print_json(summary)
         return
     shown = [k for k in (keys or summary) if k in summary and summary[k] not in ("", None, [])]
     width = max((len(k) for k in shown), default=0)
     for key in shown:
         print(f"{key:>{width}}: {summary[key]}")
+
+
+def error_file(exc: BaseException, message: str) -> str | None:
+    """The file an error is about: the exception's own (``InputError.path``, ``OSError.filename``), else
+    the ``path`` of a ``path: problem`` message when that path exists or looks like a file name."""
+    for attr in ("path", "filename"):
+        value = getattr(exc, attr, None)
+        if value:
+            return str(value)
+    head = message.split(": ", 1)[0] if ": " in message else ""
+    if head and " " not in head and (Path(head).exists() or "/" in head or Path(head).suffix):
+        return head
+    return None
+
+
+def error_object(message: str, *, status: int, kind: str, file: str | None = None) -> dict[str, Any]:
+    """The ``--json`` error object: ``error`` (the message), ``file`` (or null), ``status`` (the exit
+    status) and ``kind`` (``usage``, ``config``, ``input``, ``stage``, ``run``, ``os``, ``interrupted``,
+    ``error``)."""
+    return {"error": message, "file": file, "status": status, "kind": kind}

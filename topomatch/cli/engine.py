@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from topomatch.cli.common import command, path_argument, to_json
+from topomatch.cli.common import command, info, path_argument, print_json, verbosity
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.paths import DATA_ROOT_ENV
 
@@ -25,7 +25,7 @@ def add_parsers(sub) -> None:
             "folder (config, manifest, tables, figures, index.html).", handler=cmd_run, build=_run_arguments)
     command(sub, "validate", help="check a config without running it", description="Validate a config: structure, "
             "stage names, parameters, sweeps, reports, and that the input files exist.", handler=cmd_validate,
-            build=_add_config_args)
+            build=_validate_arguments)
     command(sub, "stages", help="list stages and reports with their parameters", description="List every "
             "registered stage and report with parameters and defaults.", handler=cmd_stages,
             build=lambda p: p.add_argument("--json", action="store_true", help="print JSON"))
@@ -34,12 +34,19 @@ def add_parsers(sub) -> None:
             handler=cmd_configs, build=lambda p: None)
 
 
+def _validate_arguments(p: argparse.ArgumentParser) -> None:
+    _add_config_args(p)
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
 def _run_arguments(p: argparse.ArgumentParser) -> None:
     _add_config_args(p)
     p.add_argument("--out", type=path_argument, metavar="DIR", default="runs", help="parent folder of run folders (default: runs)")
     p.add_argument("--cache-dir", type=path_argument, metavar="DIR", help="stage cache (default: OUT/.cache)")
     p.add_argument("--no-cache", action="store_true", help="recompute everything, store nothing")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar (also hidden by -q)")
+    p.add_argument("--json", action="store_true", help="print one JSON object on stdout: the run folder, counts, "
+                                                       "timings, failures and output files")
 
 
 def cmd_run(args: argparse.Namespace) -> int:
@@ -48,24 +55,35 @@ def cmd_run(args: argparse.Namespace) -> int:
 
     experiment = load_config(args.config, overrides=args.overrides, data_root_dir=args.data_root)
     n = len(experiment.items())
-    print(f"{experiment.name}: {len(experiment.inputs)} inputs x {len(experiment.sweep_points())} sweep points "
-          f"= {n} items, {len(experiment.calls)} stages", file=sys.stderr)
+    info(f"{experiment.name}: {len(experiment.inputs)} inputs x {len(experiment.sweep_points())} sweep points "
+         f"= {n} items, {len(experiment.calls)} stages")
     outcome = run_experiment(
         experiment, out_root=args.out, cache_dir=args.cache_dir, use_cache=not args.no_cache,
-        progress=not args.no_progress,
+        progress=not args.no_progress and verbosity() >= 0,
     )
     m = outcome.manifest
-    print(f"wrote {outcome.run_dir}/index.html  ({m['seconds']['compute']:.1f} s, "
-          f"cache hits {m['cache']['hits']}/{m['cache']['stage_results']})")
-    for label, paths in m["outputs"].items():
-        for p in paths:
-            print(f"  {label}: {p}")
+    errors = [p[7:] for paths in m["outputs"].values() for p in paths if p.startswith("ERROR: ")]
+    if args.json:
+        print_json({"name": experiment.name, "config": str(experiment.source) if experiment.source else None,
+                    "run_dir": str(outcome.run_dir), "index_html": str(outcome.run_dir / "index.html"),
+                    "n_items": n, "n_failed": len(outcome.failed), "seconds": m["seconds"],
+                    "cache": {"hits": m["cache"]["hits"], "stage_results": m["cache"]["stage_results"]},
+                    "failures": [r.error for r in outcome.failed], "report_errors": errors,
+                    "outputs": {k: [p for p in v if not p.startswith("ERROR: ")] for k, v in m["outputs"].items()}})
+    else:
+        print(f"wrote {outcome.run_dir}/index.html  ({m['seconds']['compute']:.1f} s, "
+              f"cache hits {m['cache']['hits']}/{m['cache']['stage_results']})")
+        n_files = sum(1 for paths in m["outputs"].values() for p in paths if not p.startswith(("ERROR: ", "NOTE: ")))
+        if verbosity() < 1:
+            info(f"  {n_files} output files of {len(m['outputs'])} reports (-v lists them)")
+        for label, paths in m["outputs"].items():
+            for p in paths:
+                info(f"  {label}: {p}", level=1)
     if outcome.failed:
         lines = "\n".join(f"  {r.error}" for r in outcome.failed)
         raise RunError(f"{len(outcome.failed)} of {n} items failed (the others were written):\n{lines}")
-    errors = [p for paths in m["outputs"].values() for p in paths if p.startswith("ERROR: ")]
     if errors:
-        raise RunError("\n".join(e[7:] for e in errors))
+        raise RunError("\n".join(errors))
     return 0
 
 
@@ -73,6 +91,12 @@ def cmd_validate(args: argparse.Namespace) -> int:
     from topomatch.experiments import load_config
 
     experiment = load_config(args.config, overrides=args.overrides, data_root_dir=args.data_root)
+    if args.json:
+        print_json({"config": str(experiment.source), "ok": True, "name": experiment.name,
+                    "n_inputs": len(experiment.inputs), "n_sweep_points": len(experiment.sweep_points()),
+                    "n_items": len(experiment.items()), "stages": [c.label for c in experiment.calls],
+                    "reports": [r.name for r in experiment.reports]})
+        return 0
     print(f"{experiment.source}: ok ({experiment.name}: {len(experiment.inputs)} inputs, "
           f"{len(experiment.sweep_points())} sweep points, {len(experiment.calls)} stages, "
           f"{len(experiment.reports)} reports)")
@@ -93,7 +117,7 @@ def cmd_stages(args: argparse.Namespace) -> int:
         "reports": {name: {"doc": r.doc, "params": params(r)} for name, r in sorted(REPORTS.items())},
     }
     if args.json:
-        print(to_json(listing, indent=2, default=str))
+        print_json(listing, indent=2, default=str)
         return 0
     for kind in ("stages", "reports"):
         print(f"{kind.upper()}")

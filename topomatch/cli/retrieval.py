@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from topomatch.cli.common import command, path_argument, to_json
+from topomatch.cli.common import command, path_argument, print_json, verbosity
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 
@@ -97,7 +97,8 @@ def _index_arguments(p: argparse.ArgumentParser) -> None:
                                     "relative to the CSV's folder")
     add_options(p, _models(), EXECUTOR_OPTIONS)
     p.add_argument("--retry-failed", action="store_true", help="recompute meshes recorded as failed")
-    p.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    p.add_argument("--no-progress", action="store_true", help="hide the progress bar (also hidden by -q)")
+    p.add_argument("--json", action="store_true", help="print one JSON object: counts per part method, failures")
 
 
 def _query_arguments(p: argparse.ArgumentParser) -> None:
@@ -127,11 +128,11 @@ def cmd_match(args: argparse.Namespace) -> int:
     result = match(args.a, args.b, method=args.method, options=_given(args))
     out = result.to_dict()
     if args.json:
-        print(to_json(out))
+        print_json(out)
     else:
         print(f"dissimilarity ({args.method}): {result.dissimilarity:.6g}")
         if result.correspondence is not None:
-            print(f"endpoints: {result.endpoints_a} vs {result.endpoints_b}")
+            print(f"endpoints: {result.n_endpoints_a} vs {result.n_endpoints_b}")
             for pair in result.correspondence:
                 print(f"  endpoint {pair['a']:>2} <-> {pair['b']:>2}   Phi = {pair['cost']:.4f}")
     return 0
@@ -143,21 +144,29 @@ def cmd_index(args: argparse.Namespace) -> int:
     settings = given_options(args, _models(), EXECUTOR_OPTIONS).get("executor", {})
     report = index(args.paths, args.db, method=args.method, labels=args.labels, workers=settings.get("workers"),
                    executor=settings.get("kind"), retry_failed=args.retry_failed,
-                   progress=not args.no_progress)
-    for part in report.parts:
-        before = f", {part.failed_before} failed before (skipped; --retry-failed retries them)" \
-            if part.failed_before else ""
-        print(f"{report.db}: {part.done} indexed, {part.failed} failed, {report.n_files - part.todo} unchanged "
-              f"(skipped){before} [{part.method}, {part.seconds:.1f} s of worker time]")
-    print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
-    if report.open_meshes:
-        print(f"{len(report.open_meshes)} meshes are open (have boundaries): the spectrum, heat kernel and skeleton "
-              f"use natural (Neumann) boundary conditions")
-    if report.multi_component_meshes:
-        print(f"{len(report.multi_component_meshes)} meshes have several components: the largest was indexed")
-    for part in report.parts:
-        for reason in part.failures:
-            print(f"  failed ({part.method}): {reason}", file=sys.stderr)
+                   progress=not args.no_progress and verbosity() >= 0)
+    if args.json:
+        print_json({"db": str(report.db), "method": report.method, "n_files": report.n_files,
+                    "seconds": report.seconds, "n_failed": report.failed,
+                    "parts": [{"method": p.method, "indexed": p.done, "failed": p.failed,
+                               "unchanged": report.n_files - p.todo, "failed_before": p.failed_before,
+                               "seconds": p.seconds, "failures": list(p.failures)} for p in report.parts],
+                    "open_meshes": report.open_meshes, "multi_component_meshes": report.multi_component_meshes})
+    else:
+        for part in report.parts:
+            before = f", {part.failed_before} failed before (skipped; --retry-failed retries them)" \
+                if part.failed_before else ""
+            print(f"{report.db}: {part.done} indexed, {part.failed} failed, {report.n_files - part.todo} unchanged "
+                  f"(skipped){before} [{part.method}, {part.seconds:.1f} s of worker time]")
+        print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
+        if report.open_meshes:
+            print(f"{len(report.open_meshes)} meshes are open (have boundaries): the spectrum, heat kernel and "
+                  f"skeleton use natural (Neumann) boundary conditions")
+        if report.multi_component_meshes:
+            print(f"{len(report.multi_component_meshes)} meshes have several components: the largest was indexed")
+        for part in report.parts:
+            for reason in part.failures:
+                print(f"  failed ({part.method}): {reason}", file=sys.stderr)
     if report.failed:
         raise RunError(f"{report.failed} descriptors are missing from {report.db} (failed meshes, listed above); "
                        "the others were indexed")
@@ -169,9 +178,9 @@ def cmd_query(args: argparse.Namespace) -> int:
 
     result = open_index(args.db).query(args.mesh, k=args.k, method=args.method, options=_given(args))
     if args.json:
-        print(to_json(result.to_dict()))
+        print_json(result.to_dict())
     else:
-        endpoints = result.endpoints if result.endpoints is not None else "-"
+        endpoints = result.n_endpoints if result.n_endpoints is not None else "-"
         print(f"query {args.mesh} ({args.method}, {endpoints} endpoints) against {result.indexed} shapes:")
         for r in result.results:
             print(f"  {r['rank']:>3}. {r['dissimilarity']:.5f}  {r['label'] or '':<12} {r['path']}")
@@ -185,7 +194,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
     ev = open_index(args.db).evaluate(method=args.method, options=_given(args), out=args.out)
     if args.json:
-        print(to_json(ev.to_dict()))
+        print_json(ev.to_dict())
     else:
         print(ev.metrics.table(args.method))
         print(f"{ev.n} shapes; matrix ({ev.matrix_seconds:.2f} s) written to {ev.matrix}")

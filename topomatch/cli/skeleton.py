@@ -2,15 +2,15 @@
 
 Options come from the stages' params (:data:`topomatch.skeletons.SKELETON_OPTIONS`); the summary or
 ``--json`` object is :class:`topomatch.skeletons.Skeleton`'s fields; ``--out`` writes the skeleton
-as GraphML, JSON and an OBJ polyline, the unpruned Reeb graph as GraphML, and a figure.
+and the unpruned Reeb graph as PLY polylines (``--format`` adds or chooses OBJ, GraphML, JSON) and a
+figure.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 
-from topomatch.cli.common import command, path_argument, print_result
+from topomatch.cli.common import command, path_argument, print_result, warn
 from topomatch.pipeline.cli_options import add_options, given_options
 
 
@@ -36,8 +36,23 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL, optionally .gz)")
     add_options(p, _models(), SKELETON_OPTIONS)
-    p.add_argument("--out", type=path_argument, metavar="DIR", help="write skeleton.graphml/.json/.obj, reeb.graphml and skeleton.png")
+    p.add_argument("--out", type=path_argument, metavar="DIR",
+                   help="write skeleton.FMT and reeb.FMT (the unpruned Reeb graph) for each --format, and skeleton.png")
+    p.add_argument("--format", dest="formats", type=_formats, default=["ply"], metavar="FMT[,FMT]",
+                   help="file formats of --out: ply (polyline, default; open3d and trimesh read its edges), obj "
+                        "(polyline), graphml, json (networkx node-link); comma-separated, e.g. ply,graphml")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
+
+
+def _formats(text: str) -> list[str]:
+    """An argparse type: comma-separated skeleton formats."""
+    from topomatch.stages.reeb.export import SKELETON_FORMATS
+
+    formats = [f.strip().lower().lstrip(".") for f in text.split(",") if f.strip()]
+    bad = [f for f in formats if f not in SKELETON_FORMATS]
+    if bad or not formats:
+        raise argparse.ArgumentTypeError(f"expected formats among {', '.join(SKELETON_FORMATS)}, got {text!r}")
+    return formats
 
 
 def cmd_skeleton(args: argparse.Namespace) -> int:
@@ -46,8 +61,8 @@ def cmd_skeleton(args: argparse.Namespace) -> int:
     result = skeleton_with(args.mesh, given_options(args, _models(), SKELETON_OPTIONS))
     summary = result.to_dict()
     if args.out:
-        summary["files"] = write_skeleton_files(result, args.out)
+        summary["files"] = write_skeleton_files(result, args.out, args.formats)
     print_result(summary, as_json=args.json)
     for warning in result.warnings:
-        print(f"topomatch: warning: {args.mesh}: {warning}", file=sys.stderr)
+        warn(f"{args.mesh}: {warning}")
     return 0

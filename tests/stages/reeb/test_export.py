@@ -1,4 +1,5 @@
-"""Export: GraphML and JSON round trips, OBJ/PLY polylines."""
+"""Export: GraphML and JSON round trips, PLY polylines read back with their edges by open3d and
+trimesh, meshes read back by libigl and open3d, and the ``export`` report of a config run."""
 
 from __future__ import annotations
 
@@ -9,7 +10,8 @@ import numpy as np
 import pytest
 
 from topomatch.stages.morse.mixture import mixture_distance
-from topomatch.stages.reeb.export import write_graphml, write_json, write_polyline
+from topomatch.stages.mesh.export import MESH_FORMATS, mesh_text
+from topomatch.stages.reeb.export import SKELETON_FORMATS, write_graphml, write_json, write_polyline, write_skeleton
 from topomatch.stages.reeb.level_sets import level_values
 from topomatch.stages.reeb.reeb_graph import reeb_graph
 
@@ -50,3 +52,51 @@ def test_polyline(graph, tmp_path, suffix):
     else:
         ls = o3d.io.read_line_set(str(path))
         assert len(ls.points) == graph.number_of_nodes() and len(ls.lines) == graph.number_of_edges()
+
+
+def test_ply_polyline_keeps_its_edges_in_open3d_and_trimesh(graph, tmp_path):
+    import open3d as o3d
+
+    path = tmp_path / "skeleton.ply"
+    write_skeleton(graph, path)
+    ls = o3d.io.read_line_set(str(path))
+    assert len(ls.points) == graph.number_of_nodes() and len(ls.lines) == graph.number_of_edges()
+    ends = {tuple(sorted(e)) for e in np.asarray(ls.lines).tolist()}
+    nodes = list(graph.nodes)
+    assert ends == {tuple(sorted((nodes.index(a), nodes.index(b)))) for a, b in graph.edges()}
+    np.testing.assert_allclose(np.asarray(ls.points), [graph.nodes[v]["pos"] for v in nodes], rtol=1e-15)
+    trimesh = pytest.importorskip("trimesh")
+    path3d = trimesh.load(str(path))
+    assert isinstance(path3d, trimesh.path.Path3D)
+    segments = sum(len(e.points) - 1 for e in path3d.entities)
+    assert segments == graph.number_of_edges() and len(path3d.vertices) == graph.number_of_nodes()
+
+
+def test_graphml_and_json_through_networkx_keep_degrees(graph, tmp_path):
+    write_skeleton(graph, tmp_path / "s.graphml")
+    write_skeleton(graph, tmp_path / "s.json")
+    H = nx.read_graphml(tmp_path / "s.graphml", force_multigraph=True)
+    J = nx.node_link_graph(json.loads((tmp_path / "s.json").read_text()), edges="edges")
+    for G in (H, J):
+        assert sorted(d for _, d in G.degree()) == sorted(d for _, d in graph.degree())
+
+
+def test_unknown_format_is_refused(graph, tmp_path):
+    with pytest.raises(ValueError, match=r"skeleton\.stl: a skeleton file must end in one of \.ply"):
+        write_skeleton(graph, tmp_path / "skeleton.stl")
+    assert SKELETON_FORMATS[0] == "ply"
+
+
+@pytest.mark.parametrize("fmt", MESH_FORMATS)
+def test_mesh_text_reads_back_exactly(bundled_mesh, tmp_path, fmt):
+    import igl
+    import open3d as o3d
+
+    m = bundled_mesh("torus.off")
+    path = tmp_path / f"m.{fmt}"
+    path.write_text(mesh_text(m.V, m.F, fmt))
+    V, F = igl.read_triangle_mesh(str(path))
+    np.testing.assert_array_equal(V, m.V)
+    np.testing.assert_array_equal(F, m.F)
+    o3 = o3d.io.read_triangle_mesh(str(path))
+    assert len(o3.vertices) == m.n_vertices and len(o3.triangles) == m.n_faces

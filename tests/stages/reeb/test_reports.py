@@ -1,0 +1,134 @@
+"""The skeleton reports of a config run: the ``export`` report's files read back by open3d and
+networkx with the counts of the run's own results; the gallery's keys; the interactive 3D view
+loaded in headless Chromium (no JavaScript error, one WebGL canvas per shape, a screenshot kept in
+``$TOPOMATCH_ARTEFACTS`` when set)."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+
+import networkx as nx
+import numpy as np
+import pytest
+from pathlib import Path
+
+from topomatch.pipeline.config import build_experiment
+from topomatch.pipeline.runner import run_experiment
+from tests_paths import BUNDLED_MESHES
+
+
+@pytest.fixture(scope="module")
+def skeleton_run(tmp_path_factory):
+    config = {
+        "name": "skeleton-reports",
+        "inputs": {"meshes": [str(BUNDLED_MESHES / "torus.off"), str(BUNDLED_MESHES / "eight_genus2.off")]},
+        "stages": ["load", {"clean": {"components": "largest"}}, {"decimate": {"ratio": 0.5}},
+                   {"morse": {"function": "mixture"}}, "level_sets", "reeb_graph", "prune"],
+        "reports": [{"export": {"meshes": ["clean", "decimate"], "graph_formats": ["ply", "graphml", "json"]}},
+                    {"skeleton_gallery": {"name": "gallery", "up": "z"}},
+                    {"skeleton_3d": {"name": "view", "up": "z"}}],
+        "figure_format": ["png", "svg"],
+    }
+    out = tmp_path_factory.mktemp("runs")
+    return run_experiment(build_experiment(config), out_root=out, progress=False)
+
+
+def test_export_writes_meshes_and_skeletons_that_read_back(skeleton_run):
+    import open3d as o3d
+
+    d = skeleton_run.run_dir
+    rows = json.loads((d / "tables" / "exports.json").read_text())
+    assert len(rows) == 2 * (2 + 3)  # two items x (two meshes + three skeleton files)
+    for r in skeleton_run.items:
+        stem = r.input_path.split("/")[-1].split(".")[0]
+        clean, decimated, skel = r.results["clean"].mesh, r.results["decimate"].mesh, r.final("skeleton")
+        for which, mesh in (("clean", clean), ("decimate", decimated)):
+            m = o3d.io.read_triangle_mesh(str(d / "exports" / stem / f"mesh_{which}.ply"))
+            assert (len(m.vertices), len(m.triangles)) == (mesh.n_vertices, mesh.n_faces)
+        assert decimated.n_faces < clean.n_faces
+        ls = o3d.io.read_line_set(str(d / "exports" / stem / "skeleton.ply"))
+        assert (len(ls.points), len(ls.lines)) == (skel.graph.number_of_nodes(), skel.graph.number_of_edges())
+        G = nx.read_graphml(d / "exports" / stem / "skeleton.graphml", force_multigraph=True)
+        assert nx.is_isomorphic(G, nx.MultiGraph(nx.relabel_nodes(skel.graph, str)))
+        assert sum(1 for v in G if v != "root" and G.degree(v) == 1) == len(skel.endpoints)
+
+
+def test_export_refuses_a_stage_that_makes_no_mesh(tmp_path):
+    config = {"name": "bad-export", "inputs": {"meshes": [str(BUNDLED_MESHES / "torus.off")]},
+              "stages": ["load", {"morse": {"function": "mixture"}}],
+              "reports": [{"export": {"meshes": ["morse"]}}]}
+    outcome = run_experiment(build_experiment(config), out_root=tmp_path, progress=False)
+    assert outcome.manifest["outputs"]["export"] == [
+        "ERROR: report export failed: ConfigError: export: stage 'morse' produces no mesh; choose among ['load']"]
+
+
+def test_gallery_has_keys_and_every_format(skeleton_run):
+    d = skeleton_run.run_dir
+    assert (d / "figures" / "gallery.png").stat().st_size > 20_000
+    svg = (d / "figures" / "gallery.svg").read_text()
+    for text in ("endpoint (degree 1)", "root", "skeleton edge", "Mixture distance", "its minimum to its maximum"):
+        assert text in svg, text
+    page = (d / "index.html").read_text()
+    assert "<h2 id='r2'>Gallery" in page and "figures/gallery.svg" in page
+
+
+def test_depth_sorted_drawing_hides_a_far_branch_behind_the_near_surface():
+    """A segment behind an opaque square is covered; in front of it, it is drawn on top."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from topomatch.stages.reeb.render import draw_scene
+
+    square_V = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], float)
+    square_F = np.array([[0, 1, 2], [0, 2, 3]])
+    colours = {}
+    for depth in (-0.5, 0.5):  # the view looks down the z axis (elev 90): larger z is nearer
+        g = nx.MultiGraph()
+        g.add_node("a", pos=np.array([-0.9, 0.0, depth]))
+        g.add_node("b", pos=np.array([0.9, 0.0, depth]))
+        g.add_edge("a", "b")
+        fig, ax = plt.subplots(figsize=(2, 2), dpi=50)
+        draw_scene(ax, square_V, square_F, graph=g, elev=90, azim=-90, alpha=1.0, line_width=0.05)
+        fig.canvas.draw()
+        img = np.asarray(fig.canvas.buffer_rgba())[..., :3].astype(int)
+        plt.close(fig)
+        colours[depth] = img[img.shape[0] // 2, img.shape[1] // 2]
+    assert colours[0.5].max() < 60  # the near segment: black over the surface
+    assert colours[-0.5].min() > 120  # the far one: hidden, the grey-blue surface shows
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+
+
+CHROMIUM_FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
+                  "--use-angle=swiftshader", "--virtual-time-budget=20000", "--window-size=1400,2400"]
+
+
+@pytest.mark.skipif(_chromium() is None, reason="no chromium (Debian package 'chromium'; installed in CI by "
+                                                "scripts/install-system-deps.sh --browser)")
+def test_run_page_loads_in_chromium_with_its_3d_view(skeleton_run, tmp_path):
+    d = skeleton_run.run_dir
+    assert (d / "assets" / "plotly.min.js").stat().st_size > 1_000_000  # offline: no CDN
+    page = (d / "index.html").read_text()
+    assert not re.search(r"src=['\"]?https?:", page) and "<script src='assets/plotly.min.js'>" in page
+    url = (d / "index.html").resolve().as_uri()
+    dom = subprocess.run([_chromium(), *CHROMIUM_FLAGS, "--dump-dom", url], capture_output=True, text=True,
+                         timeout=240).stdout
+    assert "<html" in dom
+    errors = re.search(r'data-js-errors="([^"]*)"', dom)
+    assert errors is None, errors.group(1)
+    canvases = dom.count("<canvas")
+    assert canvases >= 2, "the plotly view drew no WebGL canvas"  # one scene per shape
+    assert "view-view" in dom and "torus" in dom
+    shot = Path(os.environ.get("TOPOMATCH_ARTEFACTS") or tmp_path) / "run_page_3d.png"
+    shot.parent.mkdir(parents=True, exist_ok=True)
+    subprocess.run([_chromium(), *CHROMIUM_FLAGS, f"--screenshot={shot}", (d / "views" / "view.html").resolve().as_uri()],
+                   capture_output=True, timeout=240, cwd=tmp_path)
+    assert shot.stat().st_size > 20_000

@@ -1,0 +1,44 @@
+"""``topomatch thesis``: run the thesis's figure and table configs and write one page mapping each
+thesis figure and table to our output, the claim, the measured verdict and the config
+(:mod:`topomatch.thesis`)."""
+
+from __future__ import annotations
+
+import argparse
+
+from topomatch.cli.common import command, info, path_argument, print_json
+from topomatch.pipeline.paths import DATA_ROOT_ENV
+
+
+def add_parsers(sub) -> None:
+    command(sub, "thesis", help="reproduce the thesis's figures and tables on one page",
+            description="Run every figure and table config of the thesis (bundled data, and the data root for "
+                        "the rest; what is missing is skipped with a note) and write OUT/thesis.html: for each "
+                        "thesis figure and table its caption and claim, our figure or table, the measured verdict "
+                        "and the config.", handler=cmd_thesis, build=_arguments)
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--out", type=path_argument, metavar="DIR", default="thesis",
+                   help="folder of the page and of the runs (default: thesis)")
+    p.add_argument("--data-root", type=path_argument, metavar="DIR",
+                   help=f"external data root (default: ${DATA_ROOT_ENV}); without it the configs that need it are skipped")
+    p.add_argument("--only", action="append", default=[], metavar="ID",
+                   help="only these figures/tables or configs (repeatable): 'Fig. 3.9', 3.9, 'Table 3.1', "
+                        "robustness/noise")
+    p.add_argument("--json", action="store_true", help="print one JSON object: the verdict of every item")
+
+
+def cmd_thesis(args: argparse.Namespace) -> int:
+    from topomatch.thesis import reproduce
+
+    outcomes = reproduce(args.out, data_root=args.data_root, only=args.only or None, progress=info)
+    page = f"{args.out}/thesis.html"
+    if args.json:
+        print_json({"page": page, "items": [o.to_dict() for o in outcomes]})
+    else:
+        width = max(len(o.item.id) for o in outcomes)
+        for o in outcomes:
+            print(f"{o.item.id:<{width}}  {o.verdict:<12}  {o.measured}")
+        print(f"wrote {page}")
+    return 0
