@@ -160,9 +160,10 @@ def shortlisted_dissimilarities(query: dict, descriptors: dict, fusion, ann: Sho
     from topomatch.stages.retrieval.fusion import fuse
     from topomatch.stages.retrieval.ranking import dissimilarities
 
-    position = {int(key): i for i, key in enumerate(keys.tolist())}
     found = ann.search({p: query[p].data.ravel() for p in ann.parts}, count)
-    cand = np.array([position[int(key)] for key in found.tolist() if int(key) in position], dtype=np.int64)
+    order = np.argsort(keys, kind="stable")
+    at = np.minimum(np.searchsorted(keys[order], found), len(keys) - 1)
+    cand = order[at][keys[order][at] == found]  # the database rows of the keys found (a stale key is skipped)
     rows = [dissimilarities(query[p], [descriptors[p][i] for i in cand], p, options(p)) for p in decision.kept]
     d = np.full(len(keys), np.inf)
     d[cand] = fuse(rows, [scales[p] for p in decision.kept], fusion.order_weights)
