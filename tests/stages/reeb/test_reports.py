@@ -127,7 +127,8 @@ def test_run_page_loads_in_chromium_with_its_3d_view(skeleton_run, tmp_path):
     canvases = dom.count("<canvas")
     assert canvases >= 2, "the plotly view drew no WebGL canvas"  # one scene per shape
     assert "view-view" in dom and "torus" in dom
-    shot = Path(os.environ.get("TOPOMATCH_ARTEFACTS") or tmp_path) / "run_page_3d.png"
+    # absolute: Chromium runs in tmp_path, and make test gives a folder relative to the repository
+    shot = Path(os.environ.get("TOPOMATCH_ARTEFACTS") or tmp_path).resolve() / "run_page_3d.png"
     shot.parent.mkdir(parents=True, exist_ok=True)
     subprocess.run([_chromium(), *CHROMIUM_FLAGS, f"--screenshot={shot}", (d / "views" / "view.html").resolve().as_uri()],
                    capture_output=True, timeout=240, cwd=tmp_path)
