@@ -6,10 +6,7 @@ loaded in headless Chromium (no JavaScript error, one WebGL canvas per shape, a 
 from __future__ import annotations
 
 import json
-import os
 import re
-import shutil
-import subprocess
 
 import networkx as nx
 import numpy as np
@@ -18,6 +15,7 @@ from pathlib import Path
 
 from topomatch.pipeline.config import build_experiment
 from topomatch.pipeline.runner import run_experiment
+from browser import dump_dom, needs_chromium, screenshot
 from tests_paths import BUNDLED_MESHES
 
 
@@ -103,33 +101,18 @@ def test_depth_sorted_drawing_hides_a_far_branch_behind_the_near_surface():
     assert colours[-0.5].min() > 120  # the far one: hidden, the grey-blue surface shows
 
 
-def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
-
-
-CHROMIUM_FLAGS = ["--headless=new", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
-                  "--use-angle=swiftshader", "--virtual-time-budget=20000", "--window-size=1400,2400"]
-
-
-@pytest.mark.skipif(_chromium() is None, reason="no chromium (Debian package 'chromium'; installed in CI by "
-                                                "scripts/install-system-deps.sh --browser)")
+@needs_chromium
 def test_run_page_loads_in_chromium_with_its_3d_view(skeleton_run, tmp_path):
     d = skeleton_run.run_dir
     assert (d / "assets" / "plotly.min.js").stat().st_size > 1_000_000  # offline: no CDN
     page = (d / "index.html").read_text()
     assert not re.search(r"src=['\"]?https?:", page) and "<script src='assets/plotly.min.js'>" in page
-    url = (d / "index.html").resolve().as_uri()
-    dom = subprocess.run([_chromium(), *CHROMIUM_FLAGS, "--dump-dom", url], capture_output=True, text=True,
-                         timeout=240).stdout
+    dom = dump_dom(d / "index.html")
     assert "<html" in dom
     errors = re.search(r'data-js-errors="([^"]*)"', dom)
     assert errors is None, errors.group(1)
     canvases = dom.count("<canvas")
     assert canvases >= 2, "the plotly view drew no WebGL canvas"  # one scene per shape
     assert "view-view" in dom and "torus" in dom
-    # absolute: Chromium runs in tmp_path, and make test gives a folder relative to the repository
-    shot = Path(os.environ.get("TOPOMATCH_ARTEFACTS") or tmp_path).resolve() / "run_page_3d.png"
-    shot.parent.mkdir(parents=True, exist_ok=True)
-    subprocess.run([_chromium(), *CHROMIUM_FLAGS, f"--screenshot={shot}", (d / "views" / "view.html").resolve().as_uri()],
-                   capture_output=True, timeout=240, cwd=tmp_path)
+    shot = screenshot(d / "views" / "view.html", "run_page_3d.png", tmp_path)
     assert shot.stat().st_size > 20_000

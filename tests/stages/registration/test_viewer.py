@@ -1,0 +1,55 @@
+"""The registration slice viewer of the run pages (plain JavaScript on canvases), in headless Chromium."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from browser import dump_dom, needs_chromium, screenshot
+from topomatch.stages.registration.viewer import MAX_SIDE, slice_viewer
+
+
+def _page(tmp_path, fragment):
+    page = tmp_path / "viewer.html"
+    page.write_text("<!doctype html><html><head><meta charset='utf-8'><script>window.addEventListener('error',"
+                    "function(e){document.documentElement.setAttribute('data-js-errors',e.message)});</script></head>"
+                    f"<body>{fragment}</body></html>")
+    return page
+
+
+def test_fragment_carries_reduced_volumes_and_refuses_mismatched_shapes():
+    vol = np.random.default_rng(0).random((40, 400, 90))
+    html = slice_viewer(vol, vol, vol, (3.0, 1.0, 1.0), "t", "v0")
+    assert html.count("<canvas") == 3 and html.count("class='slice'") == 3
+    shape = [int(x) for x in re.search(r'"shape": \[(\d+), (\d+), (\d+)\]', html).groups()]
+    assert shape[0] == 40 and shape[1] <= MAX_SIDE and shape[2] == 90
+    with pytest.raises(ValueError, match="one shape"):
+        slice_viewer(vol, vol[:10], vol, (1, 1, 1), "t", "v1")
+
+
+@needs_chromium
+def test_volume_viewer_draws_three_orthogonal_slices_without_errors(tmp_path):
+    k, j, i = np.mgrid[:30, :50, :60]
+    fixed = ((k - 15) ** 2 / 100 + (j - 25) ** 2 / 400 + (i - 30) ** 2 / 600 < 1).astype(float)
+    moved = np.roll(fixed, 4, axis=2)
+    page = _page(tmp_path, slice_viewer(fixed, moved, fixed, (3.0, 1.0, 1.0), "ellipsoid", "vol"))
+    dom = dump_dom(page)
+    assert re.search(r'data-js-errors="', dom) is None
+    drawn = int(re.search(r'data-drawn="(\d+)"', dom).group(1))
+    assert drawn > 0.3 * (50 * 60)  # the ellipsoid's slices are drawn (fixed and moving blended)
+    assert screenshot(page, "registration_viewer_3d.png", tmp_path).stat().st_size > 5_000
+
+
+@needs_chromium
+def test_registration_demo_page_has_its_slice_viewer(tmp_path):
+    from topomatch.pipeline.config import load_experiment
+    from topomatch.pipeline.runner import run_experiment
+    from tests_paths import REPO_ROOT
+
+    run = run_experiment(load_experiment(REPO_ROOT / "configs" / "registration" / "demo.yaml"), out_root=tmp_path)
+    view = run.run_dir / "views" / "slices.html"
+    dom = dump_dom(view)
+    assert re.search(r'data-js-errors="', dom) is None and int(re.search(r'data-drawn="(\d+)"', dom).group(1)) > 1000
+    assert "slice-viewer" in (run.run_dir / "index.html").read_text()
