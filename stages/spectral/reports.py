@@ -48,12 +48,14 @@ def spectral_figures_report(experiment, results, params: SpectralFiguresParams) 
         for ax, M, title in ((axes_spy[row][0], lap.Q, "Q (cotangent)"), (axes_spy[row][1], lap.K, f"K ({params.mass} mass)")):
             ax.spy(M, markersize=0.3, color="black")
             ax.set_title(f"{label}: {title}, nnz = {M.nnz:,}", fontsize=8)
+            ax.set_xlabel("column (vertex index)", fontsize=7)
+            ax.set_ylabel("row (vertex index)", fontsize=7)
             ax.tick_params(labelsize=6)
         for j in range(params.eigenfunctions):
             ax = fig_phi.add_subplot(len(items), cols, row * cols + j + 1, projection="3d")
             draw_mesh(ax, z_up(mesh, params.up), values=eig.vectors[:, j], cmap="coolwarm",
                       elev=params.elev, azim=params.azim)
-            ax.set_title(f"{label}: phi_{j + 1}, lambda = {eig.values[j]:.4g}", fontsize=7)
+            ax.set_title(f"{label}: φ{j + 1}, λ{j + 1} = {eig.values[j]:.4g}", fontsize=7)
         ax = fig_phi.add_subplot(len(items), cols, row * cols + cols, projection="3d")
         phi2 = eig.vectors[:, 1]
         draw_mesh(ax, z_up(mesh, params.up), values=phi2, cmap="coolwarm", elev=params.elev, azim=params.azim,
@@ -61,10 +63,16 @@ def spectral_figures_report(experiment, results, params: SpectralFiguresParams) 
         ax.computed_zorder = False
         seg = isolines(mesh.V, mesh.F, phi2, level_values(phi2, params.levels)).segments[:, :, list(UP_ORDER[params.up])]
         ax.add_collection3d(Line3DCollection(seg, colors="black", linewidths=0.6))
-        ax.set_title(f"{label}: {params.levels} level sets of phi_2", fontsize=7)
+        ax.set_title(f"{label}: {params.levels} level sets of φ2", fontsize=7)
         rows.append({"input": label, "vertices": mesh.n_vertices, "nnz_Q": int(lap.Q.nnz), "nnz_K": int(lap.K.nnz),
                      **{f"lambda_{j + 1}": float(eig.values[j]) for j in range(k)}, "solver": eig.method})
+    fig_spy.suptitle("Sparsity of the stiffness Q and mass K matrices (Q φ = λ K φ)", fontsize=9)
     fig_spy.tight_layout()
-    fig_phi.subplots_adjust(left=0, right=1, bottom=0, top=0.93, wspace=0.0, hspace=0.15)
+    fig_phi.suptitle("Leading Laplace–Beltrami eigenfunctions (each scaled to its own range)", fontsize=9)
+    fig_phi.subplots_adjust(left=0, right=1, bottom=0.08, top=0.9, wspace=0.0, hspace=0.15)
+    bar = fig_phi.add_axes((0.3, 0.03, 0.4, 0.015))
+    fig_phi.colorbar(plt.cm.ScalarMappable(cmap="coolwarm"), cax=bar, orientation="horizontal", ticks=[0, 1])
+    bar.set_xticklabels(["min", "max"], fontsize=7)
+    bar.set_xlabel("eigenfunction value", fontsize=7)
     return ReportOutput(tables={f"{params.name}_eigenvalues": rows},
                         figures={f"{params.name}_sparsity": fig_spy, f"{params.name}_eigenfunctions": fig_phi})
