@@ -65,7 +65,7 @@ def default_schedule_3d() -> list[Level3DSpec]:
     return [
         Level3DSpec(spacing=8.0, bins=16, iterations=150, step=4.0, c=4.0, samples=4000),
         Level3DSpec(spacing=4.0, bins=24, iterations=60, step=1.0, c=2.0, samples=8000),
-        Level3DSpec(spacing=2.0, bins=32, iterations=40, step=0.3, c=1.0, average=2, gain_alpha=1.0, samples=20000),
+        Level3DSpec(spacing=2.0, bins=64, iterations=40, step=0.3, c=1.0, average=2, gain_alpha=1.0, samples=40000),
     ]
 
 
@@ -113,7 +113,7 @@ class Register3DParams(Params):
     bounds: Bounds3DSpec = Field(default_factory=Bounds3DSpec, description="search box: max_translation, max_angle")
     check: Check3DSpec = Field(default_factory=Check3DSpec, description="self-check")
     sample_mask: Literal["none", "foreground"] = Field(
-        "none", description="fixed voxels sampled: all, or the Otsu foreground (a mask given to the API wins)")
+        "foreground", description="fixed voxels sampled: all, or the Otsu foreground (a mask given to the API wins)")
     jitter: bool = Field(True, description="move each sample by a fixed random offset within its voxel")
     seed: int = Field(0, ge=0, description="seed of the SPSA perturbations and of the voxel samples")
 
