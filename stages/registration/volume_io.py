@@ -212,7 +212,7 @@ def read_volume_pair(fixed_path: str | Path, moving_path: str | Path) -> tuple[V
     fixed_path, moving_path = Path(fixed_path), Path(moving_path)
     dims = {p: image_dimension(p) for p in (fixed_path, moving_path)}
     for role, p, other in (("fixed", fixed_path, moving_path), ("moving", moving_path, fixed_path)):
-        if dims[p] != 3 and dims[other] == 3:
+        if dims[p] < 3 <= dims[other]:  # a 4D input gets the reader's own message
             raise InputError(p, f"the {role} image is {dims[p]}D but the other input {other.name} is a 3D volume: "
                                 f"images of different dimensionality cannot be registered")
     return read_volume(fixed_path), read_volume(moving_path)
