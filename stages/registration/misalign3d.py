@@ -16,7 +16,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from pydantic import Field
 
+from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.registration.histogram3d import trilinear
 from topomatch.stages.registration.search import otsu_threshold
 from topomatch.stages.registration.transform3d import RigidTransform3D
@@ -117,3 +119,84 @@ def mean_tre(truth: RigidTransform3D, estimate: RigidTransform3D, fixed: Volume,
         flat = flat[:: int(math.ceil(len(flat) / max_points))]
     pts = fixed.voxel_points(flat)
     return float(np.mean(np.linalg.norm(truth.apply(pts) - estimate.apply(pts), axis=1)))
+
+
+# --------------------------------------------------------------------------- stages (configs)
+
+
+class MisalignVolumeParams(Params):
+    """Parameters of :func:`misalign_volume` (case ``index`` of a random sweep; see :func:`make_case`)."""
+
+    index: int = Field(0, ge=0, description="case of the random sweep")
+    seed: int = Field(0, ge=0, description="seed of the random cases")
+    multimodal: bool = Field(False, description="remap the moving volume to a T2-like contrast")
+    crop: bool = Field(False, description="crop the moving volume to a slab")
+    crop_fraction: float = Field(0.7, gt=0, le=1, description="slab thickness as a fraction of the axis")
+    max_angle: float = Field(15.0, ge=0, le=90, allow_inf_nan=False, description="bound on each Euler angle (degrees)")
+    max_translation: float = Field(15.0, ge=0, allow_inf_nan=False, description="bound on each translation (mm)")
+    noise: float = Field(0.03, ge=0, allow_inf_nan=False, description="Gaussian noise sigma, fraction of the "
+                                                                      "intensity range")
+
+
+@dataclass(frozen=True, eq=False)
+class MisalignVolumeResult(StageResult):
+    """A fixed volume, a moving volume and the true transform (``truth``: its six parameters and centre)."""
+
+    fixed: Volume
+    moving: Volume
+    truth: dict
+
+    def summary(self) -> dict:
+        return dict(self.truth)
+
+
+def truth_dict(t: RigidTransform3D) -> dict:
+    """The six parameters (degrees, mm) and the centre of a true transform, as a config's ``truth``."""
+    ax, ay, az = t.angles_deg
+    tx, ty, tz = t.translation
+    return {"angle_x": ax, "angle_y": ay, "angle_z": az, "tx": float(tx), "ty": float(ty), "tz": float(tz),
+            "cx": t.center[0], "cy": t.center[1], "cz": t.center[2]}
+
+
+def truth_transform_3d(truth: dict) -> RigidTransform3D:
+    """Inverse of :func:`truth_dict`."""
+    angles = tuple(math.radians(truth[k]) for k in ("angle_x", "angle_y", "angle_z"))
+    return RigidTransform3D(angles + tuple(float(truth[k]) for k in ("tx", "ty", "tz")),
+                            tuple(float(truth[k]) for k in ("cx", "cy", "cz")))
+
+
+@stage("misalign_volume", params=MisalignVolumeParams, version=1, consumes=("volume",),
+       produces=("fixed", "moving", "truth"))
+def misalign_volume(volume: Volume, *, params: MisalignVolumeParams) -> MisalignVolumeResult:
+    """A synthetic 3D case with a known rigid transform (mono- or multi-modal, optionally cropped, noisy)."""
+    case = make_case(volume, params.index, seed=params.seed, multimodal=params.multimodal, crop=params.crop,
+                     max_angle=params.max_angle, max_translation=params.max_translation, noise=params.noise,
+                     crop_fraction=params.crop_fraction)
+    return MisalignVolumeResult(case.fixed, case.moving, truth_dict(case.truth))
+
+
+class Evaluate3DParams(Params):
+    """Parameters of :func:`evaluate_3d`."""
+
+    threshold: float = Field(1.0, gt=0, description="success: mean TRE over the fixed foreground at most this (mm)")
+
+
+@stage("evaluate_3d", params=Evaluate3DParams, version=1, consumes=("fixed", "registration", "truth"))
+def evaluate_3d(fixed: Volume, registration, truth, *, params: Evaluate3DParams):
+    """Mean / max target registration error (mm) over the fixed foreground against the known transform; the
+    translation error (``d_tx``, ``d_ty``: its norm and the z component) and the rotation error (``d_angle``,
+    degrees) in the 2D table's columns."""
+    from topomatch.stages.registration.evaluate import EvaluateResult
+
+    true_t = truth_transform_3d(truth)
+    est = registration.transform.with_center(true_t.center)
+    mask = fixed.data > otsu_threshold(fixed.data)
+    pts = fixed.voxel_points(np.flatnonzero(mask.ravel())[::7])
+    tre = np.linalg.norm(true_t.apply(pts) - est.apply(pts), axis=1)
+    dR = est.rotation @ true_t.rotation.T
+    d_angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(dR) - 1.0) / 2.0))))
+    dt = est.translation - true_t.translation
+    mean = float(tre.mean())
+    return EvaluateResult(registration.method, float(np.linalg.norm(dt)), float(dt[2]), d_angle, mean,
+                          float(tre.max()), bool(mean <= params.threshold), not registration.ok,
+                          registration.seconds, dict(truth))

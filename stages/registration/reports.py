@@ -413,11 +413,15 @@ def registration_table_report(experiment, results, params: RegistrationTablePara
         for k, reg in enumerate(regs):
             ev = next((e for e in evals if e.method == reg.method), None)
             t = reg.transform
-            row = {"item": r.item_id, "input": _label(r), "method": reg.method, "tx": t.tx, "ty": t.ty,
-                   "angle": t.angle}
+            row = {"item": r.item_id, "input": _label(r), "method": reg.method}
+            if hasattr(t, "angles_deg"):  # a 3D registration: six parameters (degrees, mm)
+                row.update(dict(zip(("angle_x", "angle_y", "angle_z", "tx", "ty", "tz"),
+                                    (*t.angles_deg, *map(float, t.translation)))))
+            else:
+                row.update({"tx": t.tx, "ty": t.ty, "angle": t.angle})
             if ev is not None:
-                row.update({"true_tx": ev.truth["tx"], "true_ty": ev.truth["ty"], "true_angle": ev.truth["angle"],
-                            "d_tx": ev.d_tx, "d_ty": ev.d_ty, "d_angle": ev.d_angle, "tre_mean": ev.tre_mean,
+                row.update({f"true_{k}": v for k, v in ev.truth.items() if not k.startswith("c")})
+                row.update({"d_tx": ev.d_tx, "d_ty": ev.d_ty, "d_angle": ev.d_angle, "tre_mean": ev.tre_mean,
                             "tre_max": ev.tre_max, "success": ev.success})
             row.update({"ok": reg.ok, "reason": reg.reason, "iterations": reg.iterations,
                         "evaluations": reg.evaluations, "seconds": reg.seconds})

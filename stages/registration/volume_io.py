@@ -191,6 +191,26 @@ def resample_moving(moving_path: str | Path, fixed_path: str | Path, transform: 
 # --------------------------------------------------------------------------- stages
 
 
+class LoadVolumeParams(Params):
+    """Parameters of :func:`load_volume` (none: the geometry comes from the file)."""
+
+
+@dataclass(frozen=True, eq=False)
+class LoadVolumeResult(StageResult):
+    """One volume read from a file."""
+
+    volume: Volume
+
+    def summary(self) -> dict:
+        return {"size": "x".join(map(str, self.volume.size)), "spacing": list(self.volume.spacing)}
+
+
+@stage("load_volume", params=LoadVolumeParams, version=1, consumes=("path",), produces=("volume",))
+def load_volume(path: str, *, params: LoadVolumeParams) -> LoadVolumeResult:
+    """Read one 3D volume (NIfTI, MetaImage, NRRD, DICOM) with its physical geometry."""
+    return LoadVolumeResult(read_volume(path))
+
+
 class LoadVolumePairParams(Params):
     """Parameters of :func:`load_volume_pair` (none: the geometry comes from the files)."""
 
