@@ -95,15 +95,17 @@ def run_elastix(case: Case3D) -> VolumeRegistration:
         _, tp = itk.elastix_registration_method(fixed, moving, parameter_object=po, log_to_console=False)
     except RuntimeError as exc:
         ident = RigidTransform3D(center=tuple(case.fixed.center))
-        return VolumeRegistration(ident, ident, float("nan"), False, f"elastix failed: {str(exc)[-200:]}",
-                                  "elastix/rigid", time.perf_counter() - t0, 0, 0, "exception")
+        return VolumeRegistration(transform=ident, value=float("nan"), ok=False,
+                                  reason=f"elastix failed: {str(exc)[-200:]}", method="elastix/rigid",
+                                  seconds=time.perf_counter() - t0, iterations=0, evaluations=0, stop_reason="exception")
     m = tp.GetParameterMap(0)
     params = tuple(float(v) for v in m["TransformParameters"])
     center = tuple(float(v) for v in m["CenterOfRotationPoint"])
     transform = RigidTransform3D(params, center).with_center(case.fixed.center)
     seconds = time.perf_counter() - t0
-    return VolumeRegistration(transform, transform, float("nan"), True, "", "elastix/rigid(default map)", seconds,
-                              0, 0, "")
+    return VolumeRegistration(transform=transform, value=float("nan"), ok=True, reason="",
+                              method="elastix/rigid(default map)", seconds=seconds, iterations=0, evaluations=0,
+                              stop_reason="")
 
 
 def summarise(rows: list[dict]) -> dict:

@@ -131,9 +131,7 @@ class VolumeRegistrationOutcome:
                    "matrix", "metric", "alpha", "method", "objective", "iterations", "evaluations", "overlap",
                    "seconds", "ok", "reason")
 
-    def to_dict(self) -> dict[str, Any]:
-        """The JSON fields as a plain dict."""
-        return {k: getattr(self, k) for k in self.JSON_FIELDS}
+    to_dict = RegistrationOutcome.to_dict
 
 
 def read_image(path: str | Path, *, slice: int | None = None) -> Image:

@@ -38,7 +38,8 @@ from topomatch.pipeline.contract import Params, StageError, StageResult, stage
 from topomatch.stages.registration.histogram import Binning
 from topomatch.stages.registration.histogram3d import VolumeHistogram
 from topomatch.stages.registration.objective import Objective
-from topomatch.stages.registration.params import MetricSpec, OptimizerSpec
+from topomatch.stages.registration.params import MetricSpec, OptimizerSpec, TransformSpec
+from topomatch.stages.registration.register import Registration
 from topomatch.stages.registration.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.spsa import OptimizeResult, SPSASettings, spsa_maximize
 from topomatch.stages.registration.transform3d import RigidTransform3D
@@ -67,13 +68,6 @@ def default_schedule_3d() -> list[Level3DSpec]:
         Level3DSpec(spacing=4.0, bins=24, iterations=60, step=1.0, c=2.0, samples=8000),
         Level3DSpec(spacing=2.0, bins=64, iterations=40, step=0.3, c=1.0, average=2, gain_alpha=1.0, samples=40000),
     ]
-
-
-class Init3DSpec(Params):
-    """Where the transform starts."""
-
-    init: Literal["moments", "geometry"] = Field("moments", description="initial translation: map the intensity "
-                                                                       "centroids, or the grid centres")
 
 
 class Bounds3DSpec(Params):
@@ -109,7 +103,8 @@ class Register3DParams(Params):
     schedule: list[Level3DSpec] = Field(default_factory=default_schedule_3d, min_length=1,
                                         description="coarse-to-fine levels: spacing, bins, iterations, step, c, "
                                                     "average, gain_alpha, samples")
-    transform: Init3DSpec = Field(default_factory=Init3DSpec, description="initialisation of the transform")
+    transform: TransformSpec = Field(default_factory=TransformSpec, description="initialisation of the transform "
+                                                                                 "(moments or geometry)")
     bounds: Bounds3DSpec = Field(default_factory=Bounds3DSpec, description="search box: max_translation, max_angle")
     check: Check3DSpec = Field(default_factory=Check3DSpec, description="self-check")
     sample_mask: Literal["none", "foreground"] = Field(
@@ -122,8 +117,9 @@ class Register3DParams(Params):
 
 
 @dataclass(frozen=True, eq=False)
-class VolumeRegistration:
-    """The outcome of one 3D registration.
+class VolumeRegistration(Registration):
+    """The outcome of one 3D registration: :class:`~topomatch.stages.registration.register.Registration`'s
+    fields, with
 
     Attributes
     ----------
@@ -131,32 +127,16 @@ class VolumeRegistration:
         T with ``fixed(p) ~ moving(T(p))``, about the fixed volume's physical centre.
     initial : RigidTransform3D
         Where the optimiser started.
-    value : float
-        The measure at ``transform`` at the finest level (NaN for methods without one).
-    ok, reason : bool, str
-        The self-check's verdict.
-    method : str
-    seconds : float
-    iterations, evaluations : int
-    stop_reason : str
     overlap : float
         Fraction of the finest level's fixed samples inside the moving volume at the result.
     history : dict of ndarray
         Per iteration: ``level``, ``theta`` (k, 6), ``value``, ``step``, ``blocked``.
+    spacing : (sx, sy, sz)
+        The fixed volume's voxel size (mm).
     """
 
-    transform: RigidTransform3D
-    initial: RigidTransform3D
-    value: float
-    ok: bool
-    reason: str
-    method: str
-    seconds: float
-    iterations: int
-    evaluations: int
-    stop_reason: str
+    initial: RigidTransform3D | None = None
     overlap: float = math.nan
-    history: dict[str, np.ndarray] = field(default_factory=dict)
 
     def summary(self) -> dict:
         ax, ay, az = self.transform.angles_deg
@@ -238,9 +218,11 @@ def register_volumes(fixed: Volume, moving: Volume, params: Register3DParams = R
     ok, reason = not problems, "; ".join(problems)
     keys = ("level", "theta", "value", "step", "blocked")
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
-    reg = VolumeRegistration(transform, RigidTransform3D(tuple(run.start), tuple(run.center)), float(value), ok,
-                             reason, params.method(), time.perf_counter() - t0, int(len(history["level"])),
-                             sum(lv.objective.n_evals for lv in run.levels), stop, fine.overlap(theta), history)
+    reg = VolumeRegistration(transform=transform, value=float(value), ok=ok, reason=reason, method=params.method(),
+                             seconds=time.perf_counter() - t0, iterations=int(len(history["level"])),
+                             evaluations=sum(lv.objective.n_evals for lv in run.levels), stop_reason=stop,
+                             history=history, spacing=fixed.spacing,
+                             initial=RigidTransform3D(tuple(run.start), tuple(run.center)), overlap=fine.overlap(theta))
     if not ok and params.check.on_failure == "error":
         a, t = transform.angles_deg, transform.translation
         raise StageError(f"3D registration failed: {reason} (estimate angles {a[0]:.2f}, {a[1]:.2f}, {a[2]:.2f} deg, "

@@ -106,19 +106,11 @@ class SimpleITKParams(Params):
         return self
 
 
-def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleITKParams()) -> Registration:
-    """Register with SimpleITK (Mattes MI, Euler2D, regular-step gradient descent, pyramid).
-
-    Returns
-    -------
-    Registration
-        ``transform`` about the fixed image's centre (ITK convention, pixels, degrees);
-        ``value`` is the final Mattes metric (negative MI, as SimpleITK minimises it).
-    """
+def _registration_method(params: "SimpleITKParams"):
+    """SimpleITK's ``ImageRegistrationMethod`` set up by ``params`` (metric, random sampling, linear
+    interpolation, optimiser, physical-shift scales, pyramid with smoothing in physical units), 2D and 3D alike."""
     import SimpleITK as sitk
 
-    t0 = time.perf_counter()
-    F, M = to_sitk(fixed), to_sitk(moving)
     reg = sitk.ImageRegistrationMethod()
     if params.threads is not None:
         reg.SetNumberOfThreads(params.threads)
@@ -144,6 +136,23 @@ def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleI
     reg.SetShrinkFactorsPerLevel(list(params.shrink))
     reg.SetSmoothingSigmasPerLevel(list(params.smoothing))
     reg.SmoothingSigmasAreSpecifiedInPhysicalUnitsOn()
+    return reg
+
+
+def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleITKParams()) -> Registration:
+    """Register with SimpleITK (Mattes MI, Euler2D, regular-step gradient descent, pyramid).
+
+    Returns
+    -------
+    Registration
+        ``transform`` about the fixed image's centre (ITK convention, pixels, degrees);
+        ``value`` is the final Mattes metric (negative MI, as SimpleITK minimises it).
+    """
+    import SimpleITK as sitk
+
+    t0 = time.perf_counter()
+    F, M = to_sitk(fixed), to_sitk(moving)
+    reg = _registration_method(params)
     mode = {"geometry": sitk.CenteredTransformInitializerFilter.GEOMETRY,
             "moments": sitk.CenteredTransformInitializerFilter.MOMENTS}[params.init]
     initial = sitk.CenteredTransformInitializer(F, M, sitk.Euler2DTransform(), mode)
@@ -191,28 +200,17 @@ def register_sitk(fixed: Image, moving: Image, *, params: SimpleITKParams) -> Si
 # --------------------------------------------------------------------------- 3D volumes
 
 
-class SimpleITK3DParams(Params):
+class SimpleITK3DParams(SimpleITKParams):
     """Parameters of :func:`sitk_register_3d`: the textbook SimpleITK 3D rigid set-up (Euler3D, Mattes MI,
-    regular-step gradient descent, 3-level pyramid, 20 % random sampling)."""
+    regular-step gradient descent, 3-level pyramid with smoothing sigmas in mm, 20 % random sampling,
+    geometric-centre initialisation): the fields of :class:`SimpleITKParams` with these defaults."""
 
-    bins: int = Field(50, ge=4, description="Mattes histogram bins")
-    sampling: float = Field(0.2, gt=0, le=1, description="fraction of fixed voxels sampled at random")
-    sampling_seed: int = Field(42, ge=0, description="seed of the metric's random sampling (fixed: deterministic)")
+    sampling: float = Field(0.2, gt=0, le=1, description="fraction of fixed voxels sampled at random per iteration")
     init: Literal["geometry", "moments"] = Field("geometry", description="CenteredTransformInitializer mode")
-    shrink: list[int] = Field(default_factory=lambda: [4, 2, 1], min_length=1, description="pyramid shrink factors")
-    smoothing: list[float] = Field(default_factory=lambda: [2.0, 1.0, 0.0], min_length=1,
-                                   description="Gaussian smoothing sigma per level (mm)")
-    learning_rate: float = Field(1.0, gt=0, description="regular-step gradient descent: initial step")
+    optimizer: Literal["regular_step", "gradient_descent", "line_search"] = Field(
+        "regular_step", description="regular-step gradient descent (default), gradient descent, or conjugate "
+                                    "gradient with line search")
     min_step: float = Field(1e-3, gt=0, description="stop when the step falls below this")
-    iterations: int = Field(100, ge=1, description="iterations per level")
-    threads: int | None = Field(None, ge=1, description="ITK threads (default: all cores)")
-    min_overlap: float = Field(0.25, gt=0, le=1, description="flag results with less overlap")
-
-    @model_validator(mode="after")
-    def _levels(self) -> "SimpleITK3DParams":
-        if len(self.shrink) != len(self.smoothing):
-            raise ValueError(f"shrink and smoothing need one value per level ({len(self.shrink)} vs {len(self.smoothing)})")
-        return self
 
 
 def sitk_register_3d(fixed, moving, params: SimpleITK3DParams = SimpleITK3DParams()):
@@ -228,20 +226,7 @@ def sitk_register_3d(fixed, moving, params: SimpleITK3DParams = SimpleITK3DParam
 
     t0 = time.perf_counter()
     F, M = volume_to_sitk(fixed), volume_to_sitk(moving)
-    reg = sitk.ImageRegistrationMethod()
-    if params.threads is not None:
-        reg.SetNumberOfThreads(params.threads)
-    reg.SetMetricAsMattesMutualInformation(numberOfHistogramBins=params.bins)
-    reg.SetMetricSamplingStrategy(reg.RANDOM)
-    reg.SetMetricSamplingPercentage(params.sampling, params.sampling_seed)
-    reg.SetInterpolator(sitk.sitkLinear)
-    reg.SetOptimizerAsRegularStepGradientDescent(learningRate=params.learning_rate, minStep=params.min_step,
-                                                 numberOfIterations=params.iterations, relaxationFactor=0.5,
-                                                 gradientMagnitudeTolerance=1e-8)
-    reg.SetOptimizerScalesFromPhysicalShift()
-    reg.SetShrinkFactorsPerLevel(list(params.shrink))
-    reg.SetSmoothingSigmasPerLevel(list(params.smoothing))
-    reg.SmoothingSigmasAreSpecifiedInPhysicalUnitsOn()
+    reg = _registration_method(params)
     mode = {"geometry": sitk.CenteredTransformInitializerFilter.GEOMETRY,
             "moments": sitk.CenteredTransformInitializerFilter.MOMENTS}[params.init]
     initial = sitk.CenteredTransformInitializer(F, M, sitk.Euler3DTransform(), mode)
@@ -250,14 +235,16 @@ def sitk_register_3d(fixed, moving, params: SimpleITK3DParams = SimpleITK3DParam
     reg.AddCommand(sitk.sitkIterationEvent, lambda: iterations.__setitem__(0, iterations[0] + 1))
     center = tuple(fixed.center)
     start = RigidTransform3D.from_sitk(initial, center)
-    method = "simpleitk/mattes(regular_step)/3d"
+    method = f"simpleitk/mattes({params.optimizer})/3d"
     try:
         out = reg.Execute(F, M)
     except RuntimeError as exc:
         message = str(exc).strip().splitlines()
         detail = next((m.split(":", 1)[-1].strip() for m in message if "ERROR" in m), message[-1] if message else "")
-        return VolumeRegistration(start, start, math.nan, False, f"SimpleITK failed: {detail}", method,
-                                  time.perf_counter() - t0, iterations[0], iterations[0], "exception")
+        return VolumeRegistration(transform=start, value=math.nan, ok=False, reason=f"SimpleITK failed: {detail}",
+                                  method=method, seconds=time.perf_counter() - t0, iterations=iterations[0],
+                                  evaluations=iterations[0], stop_reason="exception", spacing=fixed.spacing,
+                                  initial=start)
     transform = RigidTransform3D.from_sitk(out, center)
     seconds = time.perf_counter() - t0
     idx = moving.continuous_index(transform.apply(fixed.voxel_points(np.arange(0, fixed.data.size, 7))))
@@ -265,8 +252,10 @@ def sitk_register_3d(fixed, moving, params: SimpleITK3DParams = SimpleITK3DParam
     overlap = float(np.mean(((idx >= 0) & (idx <= hi)).all(axis=1)))
     ok = overlap >= params.min_overlap
     reason = "" if ok else f"only {overlap:.0%} of the fixed volume overlaps the moving volume at the result"
-    return VolumeRegistration(transform, start, float(reg.GetMetricValue()), ok, reason, method, seconds,
-                              iterations[0], iterations[0], reg.GetOptimizerStopConditionDescription(), overlap)
+    return VolumeRegistration(transform=transform, value=float(reg.GetMetricValue()), ok=ok, reason=reason,
+                              method=method, seconds=seconds, iterations=iterations[0], evaluations=iterations[0],
+                              stop_reason=reg.GetOptimizerStopConditionDescription(), spacing=fixed.spacing,
+                              initial=start, overlap=overlap)
 
 
 @stage("register_sitk_3d", params=SimpleITK3DParams, version=1, consumes=("fixed", "moving"),
