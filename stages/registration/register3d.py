@@ -7,7 +7,9 @@ Tsallis MI; :mod:`~topomatch.stages.registration.divergence`) of the joint histo
 ``fixed(p)`` and ``moving(T(p))`` over sampled fixed voxels (:mod:`~topomatch.stages.registration.histogram3d`):
 
 1. **Initialisation**: ``moments`` maps the fixed intensity centroid onto the moving one,
-   ``geometry`` the grid centres (ITK's ``CenteredTransformInitializer`` modes), angles 0.
+   ``geometry`` the grid centres (ITK's ``CenteredTransformInitializer`` modes), angles 0; then
+   (``start``) the best of a grid of translations about both at the coarsest level (a moving volume
+   cropped to a slab, or with another contrast, has its centroid elsewhere).
 2. **Physical-space pyramid**, coarse to fine: each :class:`Level3DSpec` block-averages both
    volumes to about ``spacing`` mm (per axis, so anisotropic voxels become near-isotropic ones) and
    samples ``samples`` fixed voxels; the optimiser (the modified SPSA of
@@ -21,7 +23,8 @@ Tsallis MI; :mod:`~topomatch.stages.registration.divergence`) of the joint histo
    initialisation), when less than ``metric.min_overlap`` of the fixed samples overlap the moving
    volume at the result, when it sits on a search bound, when the measure at the result is not
    better than at the start, or when a coarse search (rotations about each axis and shifts along
-   each, refined briefly) finds a higher coarsest-level value elsewhere.
+   each, refined briefly) finds a higher coarsest-level value elsewhere; with ``check.retry`` the
+   schedule then runs once more from there, and the higher of the two ends is checked again.
 """
 
 from __future__ import annotations
@@ -78,6 +81,17 @@ class Bounds3DSpec(Params):
     max_angle: float = Field(45.0, gt=0, le=90, description="bound on each Euler angle (degrees)")
 
 
+class Start3DSpec(Params):
+    """The search for a start: translations about the centre-mapping ones, scored at the coarsest level."""
+
+    steps: int = Field(2, ge=0, le=5, description="grid of (2 steps + 1)^3 shifts about each centre-mapping "
+                                                 "translation (0: start at transform.init's)")
+    spacing: float = Field(12.0, gt=0, allow_inf_nan=False, description="grid spacing (mm)")
+    candidates: int = Field(2, ge=0, description="best grid shifts optimised briefly at the coarsest level, besides "
+                                                 "the centres themselves")
+    iterations: int = Field(80, ge=0, description="coarsest-level iterations from each candidate")
+
+
 class Check3DSpec(Params):
     """The self-check of a 3D registration."""
 
@@ -90,6 +104,8 @@ class Check3DSpec(Params):
     refine: int = Field(30, ge=0, description="coarsest-level iterations from the best probes")
     candidates: int = Field(2, ge=1, description="best probes refined")
     margin: float = Field(0.01, ge=0, description="relative margin by which a probe must win to flag the result")
+    retry: bool = Field(True, description="when a probe wins, run the schedule once more from it and keep the "
+                                          "higher end")
     on_failure: Literal["flag", "error"] = Field("flag", description="flag a failed registration, or raise an error")
 
 
@@ -105,6 +121,7 @@ class Register3DParams(Params):
                                                     "average, gain_alpha, samples")
     transform: TransformSpec = Field(default_factory=TransformSpec, description="initialisation of the transform "
                                                                                  "(moments or geometry)")
+    start: Start3DSpec = Field(default_factory=Start3DSpec, description="coarse search for the initial translation")
     bounds: Bounds3DSpec = Field(default_factory=Bounds3DSpec, description="search box: max_translation, max_angle")
     check: Check3DSpec = Field(default_factory=Check3DSpec, description="self-check")
     sample_mask: Literal["none", "foreground"] = Field(
@@ -214,6 +231,13 @@ def register_volumes(fixed: Volume, moving: Volume, params: Register3DParams = R
     fine = run.levels[-1].objective
     value = fine(theta)
     problems = run.self_check(theta, value, stop)
+    if run.better is not None and params.check.retry:
+        # the coarse search found a higher basin: run the schedule from it, adopt it if it ends higher
+        other, other_stop = run.schedule_from(run.better)
+        other_value = fine(other)
+        if other_value > value:
+            theta, value, stop = other, other_value, other_stop
+            problems = run.self_check(theta, value, stop)
     transform = RigidTransform3D(tuple(theta), tuple(run.center))
     ok, reason = not problems, "; ".join(problems)
     keys = ("level", "theta", "value", "step", "blocked")
@@ -265,16 +289,65 @@ class _Run3D:
             self.levels.append(_Level(spec, obj, float(np.mean(F.spacing))))
         self.radius = rms_radius_3d(fixed, fixed_mask if fixed_mask is not None else foreground_mask(fixed))
         self.scales = np.array([1.0 / self.radius] * 3 + [1.0] * 3)
-        t_init = initial_translation_3d(fixed, moving, params.transform.init)
-        self.start = np.r_[0.0, 0.0, 0.0, t_init]
+        self.rng = np.random.default_rng(params.seed)
+        self.start = self.start_search(initial_translation_3d(fixed, moving, params.transform.init))
+        t_init = self.start[3:]
         b = params.bounds
         extent = np.asarray(fixed.size) * np.asarray(fixed.spacing)
         self.max_translation = b.max_translation if b.max_translation is not None else 0.25 * float(extent.max())
         a = math.radians(b.max_angle)
         self.lower = np.r_[-a, -a, -a, t_init - self.max_translation]
         self.upper = np.r_[a, a, a, t_init + self.max_translation]
-        self.rng = np.random.default_rng(params.seed)
         self.history: list[dict[str, np.ndarray]] = []
+        self.better: np.ndarray | None = None
+
+    def start_search(self, t_init: np.ndarray) -> np.ndarray:
+        """The starting parameters. With ``start.steps > 0``: a grid of ``(2 steps + 1)^3`` shifts of
+        ``start.spacing`` mm about each centre-mapping translation (``transform.init``'s, moments and geometry:
+        a moving volume cropped to a slab, or with another contrast, moves its centroid) and about the
+        identity (the files' own placement) is scored at the
+        coarsest level; the coarsest level's optimiser then runs ``start.iterations`` iterations from each
+        centre and from the ``start.candidates`` best shifts (at least half ``start.spacing`` apart), and the
+        highest end is the start."""
+        st = self.params.start
+        theta0 = np.r_[0.0, 0.0, 0.0, t_init]
+        if st.steps == 0:
+            return theta0
+        coarse = self.levels[0].objective
+        offsets = np.arange(-st.steps, st.steps + 1) * st.spacing
+        grid = np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), axis=-1).reshape(-1, 3)
+        # the files' own placement (identity) too: volumes of one subject often share a physical frame
+        centres = [t_init] + [initial_translation_3d(self.fixed, self.moving, m) for m in ("moments", "geometry")]
+        centres.append(np.zeros(3))
+        scored = [(coarse(theta0), 0, theta0)]
+        for c in centres:
+            for off in grid:
+                theta = np.r_[0.0, 0.0, 0.0, c + off]
+                scored.append((coarse(theta), len(scored), theta))
+        scored = [x for x in scored if math.isfinite(x[0])]
+        if not scored:
+            return theta0
+        scored.sort(key=lambda x: (-x[0], x[1]))
+        # every centre itself (a large rotation can make a zero-rotation score rank it low), then the best shifts
+        chosen: list[np.ndarray] = []
+        for theta in [np.r_[0.0, 0.0, 0.0, c] for c in centres] + [x[2] for x in scored]:
+            if len(chosen) >= len(centres) + st.candidates:
+                break
+            if math.isfinite(coarse(theta)) and all(np.linalg.norm(theta[3:] - other[3:]) >= 0.5 * st.spacing
+                                                    for other in chosen):
+                chosen.append(theta)
+        if not chosen:
+            return scored[0][2]
+        if st.iterations == 0 or len(chosen) == 1:
+            return chosen[0]
+        spec = self.levels[0].spec.model_copy(update={"iterations": st.iterations})
+        box = np.r_[[math.radians(self.params.bounds.max_angle)] * 3, [np.inf] * 3]
+        ends = []
+        for theta in chosen:
+            res = self.optimize(0, spec, theta, lower=-box, upper=box)
+            ends.append((coarse(res.theta), res.theta))
+        value, best = max(ends, key=lambda e: e[0] if math.isfinite(e[0]) else -math.inf)
+        return best if math.isfinite(value) else chosen[0]
 
     def optimize(self, li: int, spec: Level3DSpec, theta: np.ndarray, *, lower, upper, callback=None,
                  start: int = 0) -> OptimizeResult:
@@ -326,6 +399,7 @@ class _Run3D:
     def self_check(self, theta: np.ndarray, value: float, stop: str) -> list[str]:
         params, check = self.params, self.params.check
         problems: list[str] = []
+        self.better = None
         coarse, fine = self.levels[0].objective, self.levels[-1].objective
         start_coarse = coarse(self.start)
         if stop in ("invalid_start", "flat_objective") or not math.isfinite(start_coarse):
@@ -359,6 +433,7 @@ class _Run3D:
                     probe, v = res.theta, coarse(res.theta)
                 if (math.isfinite(v) and v > here + check.margin * abs(here)
                         and self.distance(probe, theta) > 2.0 * self.levels[0].spacing):
+                    self.better = probe
                     problems.append(f"a coarse search finds a higher value ({v:.4g} > {here:.4g} at "
                                     f"{self.levels[0].spacing:.0f} mm) {self.distance(probe, theta):.0f} mm away "
                                     f"from the result: it is probably a local optimum")
