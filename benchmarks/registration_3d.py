@@ -137,7 +137,7 @@ def main() -> None:
     out: dict = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                              "load_average_at_start": list(os.getloadavg())},
                  "params": json.loads(args.params), "sets": {}}
-    chosen = ["tune", "report"] if args.set == "all" else [args.set]
+    chosen = ["report", "tune"] if args.set == "all" else [args.set]
     for set_name in chosen:
         for source_name, seed in SETS[set_name]:
             source = read_volume(SOURCES[source_name])
@@ -155,6 +155,9 @@ def main() -> None:
                                                             f"{'' if rows[m][-1]['ok'] else ' FLAG'}" for m in methods),
                       flush=True)
             out["sets"][key] = {"summary": {m: summarise(r) for m, r in rows.items()}, "cases": rows}
+            if args.json:  # after every set: a long run that is interrupted keeps what it measured
+                args.json.parent.mkdir(parents=True, exist_ok=True)
+                args.json.write_text(json.dumps(out, indent=1, default=float))
             for m in methods:
                 s = out["sets"][key]["summary"][m]
                 print(f"== {key} {m}: {s['success']}/{s['cases']} within 1 mm, median TRE {s['median_tre']:.3f} mm, "
