@@ -49,7 +49,7 @@ SOURCES = {
     "kmeans": DATA / "itk_examples_data" / "KmeansTest_T1UCharRaw.nii.gz",
     "anatomical": DATA / "nibabel_testdata" / "anatomical.nii",
 }
-SETS = {"tune": [("kmeans", 1)], "report": [("anatomical", 2), ("kmeans", 2)]}
+SETS = {"tune": [("kmeans", 1)], "tune-anatomical": [("anatomical", 1)], "report": [("anatomical", 2), ("kmeans", 2)]}
 
 
 def cases(source: Volume, n: int, seed: int) -> list[Case3D]:
@@ -120,8 +120,9 @@ def summarise(rows: list[dict]) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--set", choices=["tune", "report", "all"], default="all")
+    ap.add_argument("--set", choices=["tune", "tune-anatomical", "report", "all"], default="all")
     ap.add_argument("--cases", type=int, default=30)
+    ap.add_argument("--sources", default="kmeans,anatomical", help="only these source volumes of the sets")
     ap.add_argument("--methods", default="ours,simpleitk,elastix")
     ap.add_argument("--params", default="{}", help="JSON overrides of the register_3d params (tuning only)")
     ap.add_argument("--json", type=Path, default=None)
@@ -140,6 +141,8 @@ def main() -> None:
     chosen = ["report", "tune"] if args.set == "all" else [args.set]
     for set_name in chosen:
         for source_name, seed in SETS[set_name]:
+            if source_name not in args.sources.split(","):
+                continue
             source = read_volume(SOURCES[source_name])
             key = f"{set_name}:{source_name}:seed{seed}"
             rows: dict[str, list[dict]] = {m: [] for m in methods}

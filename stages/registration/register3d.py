@@ -14,7 +14,9 @@ Tsallis MI; :mod:`~topomatch.stages.registration.divergence`) of the joint histo
    volumes to about ``spacing`` mm (per axis, so anisotropic voxels become near-isotropic ones) and
    samples ``samples`` fixed voxels; the optimiser (the modified SPSA of
    :mod:`~topomatch.stages.registration.spsa`, or Powell) starts from the previous level's result.
-   Step and perturbation lengths are millimetres.
+   Step and perturbation lengths are millimetres. A coarse level with fewer than
+   :data:`MIN_LEVEL_SAMPLES` samples (a small field of view) runs its iterations on the first level
+   that has enough instead.
 3. **Parameter scaling**: angles are optimised in units of ``1 / r`` radians, r the RMS distance of
    the fixed foreground from the centre, so that one unit of any parameter moves the volume by
    about 1 mm.
@@ -257,6 +259,10 @@ def register_volumes(fixed: Volume, moving: Volume, params: Register3DParams = R
 MIN_LEVEL_VOXELS = 8
 """Smallest number of voxels along every axis of a pyramid level; a coarser level uses less shrinking."""
 
+MIN_LEVEL_SAMPLES = 2000
+"""Fewest fixed samples of a pyramid level's measure; a coarser level with fewer uses the first finer level with
+enough (its schedule entry is kept)."""
+
 
 class _Run3D:
     """One 3D registration in progress: the pyramid, scaling, bounds, random stream and history."""
@@ -287,6 +293,12 @@ class _Run3D:
                                  samples=spec.samples, mask=mask, jitter=params.jitter, seed=params.seed + i)
             obj = Objective(jh, m.name, alpha=m.alpha, weights=m.weights, tmi_form=m.tmi_form, min_overlap=m.min_overlap)
             self.levels.append(_Level(spec, obj, float(np.mean(F.spacing))))
+        # a level with too few samples (a small field of view shrunk a lot) has a measure dominated by chance and
+        # by the overlap: its iterations run on the first level with enough samples instead
+        enough = next((lv for lv in self.levels if lv.objective.histogram.n_samples >= MIN_LEVEL_SAMPLES),
+                      self.levels[-1])
+        self.levels = [lv if lv.objective.histogram.n_samples >= MIN_LEVEL_SAMPLES or lv is enough
+                       else _Level(lv.spec, enough.objective, enough.spacing) for lv in self.levels]
         self.radius = rms_radius_3d(fixed, fixed_mask if fixed_mask is not None else foreground_mask(fixed))
         self.scales = np.array([1.0 / self.radius] * 3 + [1.0] * 3)
         self.rng = np.random.default_rng(params.seed)
