@@ -145,6 +145,19 @@ def read_image(path: str | Path, *, slice: int | None = None) -> Image:
     return _read_image(path, slice_index=slice)
 
 
+def read_volume(path: str | Path) -> Volume:
+    """A 3D volume (NIfTI, MetaImage, NRRD, DICOM file or series folder) with its physical geometry.
+
+    Raises
+    ------
+    InputError
+        Missing, unreadable or unusable file or folder (names it).
+    """
+    from topomatch.stages.registration.volume_io import read_volume as _read_volume
+
+    return _read_volume(path)
+
+
 def register(fixed: Image | Volume | str | Path, moving: Image | Volume | str | Path, *, metric: str | None = None,
              alpha: float | None = None, weights: str | None = None, optimizer: str | None = None,
              seed: int | None = None, fixed_slice: int | None = None,

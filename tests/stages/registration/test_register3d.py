@@ -134,3 +134,17 @@ def test_unrelated_content_is_flagged(small_t1):
     noise = small_t1.with_data(rng.normal(size=small_t1.shape))
     reg = register_volumes(small_t1, noise)
     assert not reg.ok, reg.summary()
+
+
+def test_api_registers_volumes_in_memory_and_refuses_mixed_inputs(small_t1):
+    import topomatch
+    from topomatch.stages.registration.misalign3d import make_case, mean_tre
+    from topomatch.stages.registration.transform3d import RigidTransform3D
+
+    case = make_case(small_t1, 4, seed=8, multimodal=False, crop=False)
+    out = topomatch.register(case.fixed, case.moving, metric="mi", seed=3)
+    assert isinstance(out, topomatch.VolumeRegistrationOutcome) and out.dimension == 3 and out.metric == "mi"
+    assert mean_tre(case.truth, RigidTransform3D(out.parameters, out.center), case.fixed) < 1.0
+    np.testing.assert_allclose(np.asarray(out.matrix), out.registration.transform.matrix4(), atol=1e-8)
+    with pytest.raises(topomatch.InputError, match="both volumes as files or both as Volume objects"):
+        topomatch.register(case.fixed, ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz")
