@@ -106,9 +106,11 @@ class SimpleITKParams(Params):
         return self
 
 
-def _registration_method(params: "SimpleITKParams"):
+def _registration_method(params: "SimpleITKParams", F, M, transform):
     """SimpleITK's ``ImageRegistrationMethod`` set up by ``params`` (metric, random sampling, linear
-    interpolation, optimiser, physical-shift scales, pyramid with smoothing in physical units), 2D and 3D alike."""
+    interpolation, optimiser, physical-shift scales, pyramid with smoothing in physical units, the rigid
+    ``transform`` centred by ``CenteredTransformInitializer``), 2D and 3D alike; with the initial transform
+    and a one-element list counting the iterations."""
     import SimpleITK as sitk
 
     reg = sitk.ImageRegistrationMethod()
@@ -136,7 +138,13 @@ def _registration_method(params: "SimpleITKParams"):
     reg.SetShrinkFactorsPerLevel(list(params.shrink))
     reg.SetSmoothingSigmasPerLevel(list(params.smoothing))
     reg.SmoothingSigmasAreSpecifiedInPhysicalUnitsOn()
-    return reg
+    mode = {"geometry": sitk.CenteredTransformInitializerFilter.GEOMETRY,
+            "moments": sitk.CenteredTransformInitializerFilter.MOMENTS}[params.init]
+    initial = sitk.CenteredTransformInitializer(F, M, transform, mode)
+    reg.SetInitialTransform(initial, inPlace=False)
+    iterations = [0]
+    reg.AddCommand(sitk.sitkIterationEvent, lambda: iterations.__setitem__(0, iterations[0] + 1))
+    return reg, initial, iterations
 
 
 def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleITKParams()) -> Registration:
@@ -152,13 +160,7 @@ def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleI
 
     t0 = time.perf_counter()
     F, M = to_sitk(fixed), to_sitk(moving)
-    reg = _registration_method(params)
-    mode = {"geometry": sitk.CenteredTransformInitializerFilter.GEOMETRY,
-            "moments": sitk.CenteredTransformInitializerFilter.MOMENTS}[params.init]
-    initial = sitk.CenteredTransformInitializer(F, M, sitk.Euler2DTransform(), mode)
-    reg.SetInitialTransform(initial, inPlace=False)
-    iterations = [0]
-    reg.AddCommand(sitk.sitkIterationEvent, lambda: iterations.__setitem__(0, iterations[0] + 1))
+    reg, initial, iterations = _registration_method(params, F, M, sitk.Euler2DTransform())
     try:
         out = reg.Execute(F, M)
     except RuntimeError as exc:  # e.g. "All samples map outside moving image buffer"
@@ -226,13 +228,7 @@ def sitk_register_3d(fixed, moving, params: SimpleITK3DParams = SimpleITK3DParam
 
     t0 = time.perf_counter()
     F, M = volume_to_sitk(fixed), volume_to_sitk(moving)
-    reg = _registration_method(params)
-    mode = {"geometry": sitk.CenteredTransformInitializerFilter.GEOMETRY,
-            "moments": sitk.CenteredTransformInitializerFilter.MOMENTS}[params.init]
-    initial = sitk.CenteredTransformInitializer(F, M, sitk.Euler3DTransform(), mode)
-    reg.SetInitialTransform(initial, inPlace=False)
-    iterations = [0]
-    reg.AddCommand(sitk.sitkIterationEvent, lambda: iterations.__setitem__(0, iterations[0] + 1))
+    reg, initial, iterations = _registration_method(params, F, M, sitk.Euler3DTransform())
     center = tuple(fixed.center)
     start = RigidTransform3D.from_sitk(initial, center)
     method = f"simpleitk/mattes({params.optimizer})/3d"
