@@ -246,7 +246,7 @@ def register_volumes(fixed: Volume, moving: Volume, params: Register3DParams = R
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
     reg = VolumeRegistration(transform=transform, value=float(value), ok=ok, reason=reason, method=params.method(),
                              seconds=time.perf_counter() - t0, iterations=int(len(history["level"])),
-                             evaluations=sum(lv.objective.n_evals for lv in run.levels), stop_reason=stop,
+                             evaluations=sum({id(lv.objective): lv.objective.n_evals for lv in run.levels}.values()), stop_reason=stop,
                              history=history, spacing=fixed.spacing,
                              initial=RigidTransform3D(tuple(run.start), tuple(run.center)), overlap=fine.overlap(theta))
     if not ok and params.check.on_failure == "error":
