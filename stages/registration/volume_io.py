@@ -15,6 +15,8 @@ different dimensionality.
 
 from __future__ import annotations
 
+import contextlib
+import locale
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +33,20 @@ VOLUME_SUFFIXES = (".nii", ".nii.gz", ".mha", ".mhd", ".nrrd", ".nhdr", ".dcm", 
 def _sitk_detail(exc: Exception) -> str:
     lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
     return lines[-1] if lines else "SimpleITK could not read it"
+
+
+@contextlib.contextmanager
+def keep_locale():
+    """Restore the process locale afterwards: ITK's GDCM calls can set it to "C" and leave it there (Python's
+    default text encoding then becomes ASCII for the rest of the process)."""
+    saved = locale.setlocale(locale.LC_ALL)
+    try:
+        yield
+    finally:
+        try:
+            locale.setlocale(locale.LC_ALL, saved)
+        except locale.Error:  # a composite setting this platform cannot restore in one call
+            pass
 
 
 def _dicom_files(folder: Path) -> list[str]:
@@ -77,12 +93,13 @@ def read_sitk_volume(path: str | Path):
     path = Path(path)
     try:
         if path.is_dir():
-            files = _dicom_files(path)
-            reader = sitk.ImageFileReader()
-            reader.SetFileName(files[0])
-            reader.ReadImageInformation()
-            _check_size(path, tuple(reader.GetSize()[:2]) + (len(files),))
-            image = sitk.ReadImage(files)
+            with keep_locale():
+                files = _dicom_files(path)
+                reader = sitk.ImageFileReader()
+                reader.SetFileName(files[0])
+                reader.ReadImageInformation()
+                _check_size(path, tuple(reader.GetSize()[:2]) + (len(files),))
+                image = sitk.ReadImage(files)
         else:
             if not path.exists():
                 raise InputError(path, "file not found")

@@ -23,6 +23,13 @@ def _volume(shape=(10, 12, 14), spacing=(2.0, 2.0, 3.0), origin=(5.0, -3.0, 7.0)
 
 def write_dicom_series(image, folder, series_uid: str, *, first_instance: int = 1) -> None:
     """One file per slice with the tags a DICOM reader needs to stack them (SimpleITK's DicomSeriesFromArray recipe)."""
+    from topomatch.stages.registration.volume_io import keep_locale
+
+    with keep_locale():  # GDCM's writer leaves the process locale at "C"
+        _write_dicom_series(image, folder, series_uid, first_instance)
+
+
+def _write_dicom_series(image, folder, series_uid: str, first_instance: int) -> None:
     img = sitk.Cast(sitk.RescaleIntensity(image, 0, 1000), sitk.sitkInt16)
     direction = img.GetDirection()
     writer = sitk.ImageFileWriter()
@@ -72,7 +79,11 @@ def test_dicom_series_folder_and_mixed_series(tmp_path):
     img = _volume(shape=(6, 12, 14), origin=(0.0, 0.0, 0.0))
     img.SetDirection((1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0))
     write_dicom_series(img, tmp_path / "one", "1.2.826.0.1.3680043.2.1125.2.111")
+    import locale
+
+    before = locale.setlocale(locale.LC_ALL)
     vol = read_volume(tmp_path / "one")
+    assert locale.setlocale(locale.LC_ALL) == before  # GDCM's reader does not change the process locale
     assert vol.size == (14, 12, 6)
     np.testing.assert_allclose(vol.spacing, (2.0, 2.0, 3.0), atol=1e-6)
     write_dicom_series(img, tmp_path / "mixed", "1.2.826.0.1.3680043.2.1125.2.111")
