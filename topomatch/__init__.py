@@ -9,6 +9,7 @@ The Python API (the same operations, options and defaults as the command line)::
     topomatch.index(["meshes/"], "shapes.db")                   # the best method by default
     topomatch.open_index("shapes.db").query("cat.obj", k=5).results
     reg = topomatch.register("fixed.png", "moving.png")         # reg.tx, reg.ty, reg.angle, reg.ok
+    reg = topomatch.register("fixed.nii.gz", "moving.nrrd")     # 3D: reg.parameters, reg.matrix, reg.ok
     topomatch.run_config("configs/demo.yaml").run_dir
 
 The names are loaded on first use, so ``import topomatch`` is cheap. The installed package joins
@@ -41,6 +42,8 @@ _API = {
     "QueryResult": "topomatch.retrieval", "Evaluation": "topomatch.retrieval",
     "read_image": "topomatch.registration", "register": "topomatch.registration",
     "RegistrationOutcome": "topomatch.registration", "write_registration_files": "topomatch.registration",
+    "read_volume": "topomatch.registration", "VolumeRegistrationOutcome": "topomatch.registration",
+    "write_volume_registration_files": "topomatch.registration",
     "run_config": "topomatch.experiments", "load_config": "topomatch.experiments",
     "bundled_configs": "topomatch.experiments",
     "METHODS": "topomatch.stages.retrieval.catalogue",

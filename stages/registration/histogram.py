@@ -150,6 +150,11 @@ class JointHistogram:
         UV = self._positions(theta)
         return UV[0], UV[1]
 
+    def overlap(self, theta) -> float:
+        """Fraction of the samples whose ``T(x)`` lies inside the moving image."""
+        u, v = self.positions(theta)
+        return float(np.mean((u >= 0) & (u <= self._Wm - 1) & (v >= 0) & (v <= self._Hm - 1)))
+
     def __call__(self, theta) -> tuple[np.ndarray, int]:
         """Joint histogram for ``theta = (tx, ty, angle)`` and the number of samples inside the moving image.
 

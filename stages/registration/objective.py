@@ -31,7 +31,10 @@ class Objective:
 
     Parameters
     ----------
-    histogram : JointHistogram
+    histogram : JointHistogram or VolumeHistogram
+        Anything with ``histogram(theta) -> (h, n_inside)``, ``n_samples``, ``overlap(theta)`` and
+        ``factor``: the 2D images' histogram, or the 3D volumes' of
+        :mod:`~topomatch.stages.registration.histogram3d` (theta = 3 Euler angles and a translation in mm).
     metric : {'jt', 'jr', 'mi', 'tmi'}
     alpha : float
         Order of the Tsallis / Renyi entropies (jt, jr, tmi).
@@ -61,9 +64,7 @@ class Objective:
 
     def overlap(self, theta) -> float:
         """Fraction of fixed samples whose ``T(x)`` lies inside the moving image."""
-        u, v = self.histogram.positions(theta)
-        Hm, Wm = self.histogram.moving.shape
-        return float(np.mean((u >= 0) & (u <= Wm - 1) & (v >= 0) & (v <= Hm - 1)))
+        return self.histogram.overlap(theta)
 
     def __call__(self, theta) -> float:
         self.n_evals += 1

@@ -334,6 +334,39 @@ def overlay_figure(fixed, moving, registration, title: str = ""):
     return fig
 
 
+def volume_overlay_figure(fixed, moving, registration, title: str = ""):
+    """Three orthogonal slices through the fixed volume's centre (rows: axial, coronal, sagittal in array
+    order k, j, i), each as a checkerboard of fixed and moving before (the files' own placement,
+    identity transform) and after the registration: a figure of two columns."""
+    import matplotlib.pyplot as plt
+
+    from topomatch.stages.registration.misalign3d import resample_volume
+    from topomatch.stages.registration.transform3d import RigidTransform3D
+
+    fill = float(moving.data.min())
+    before = resample_volume(moving, RigidTransform3D(center=tuple(fixed.center)), fixed, fill=fill)
+    after = resample_volume(moving, registration.transform, fixed, fill=fill)
+    nk, nj, ni = fixed.shape
+    sx, sy, sz = fixed.spacing
+    views = [("slice k (axial)", lambda a: a[nk // 2], sy / sx), ("slice j (coronal)", lambda a: a[:, nj // 2], sz / sx),
+             ("slice i (sagittal)", lambda a: a[:, :, ni // 2], sz / sy)]
+    fig, axes = plt.subplots(3, 2, figsize=(8, 11))
+    for row, (label, take, aspect) in enumerate(views):
+        for col, (moved, when) in enumerate(((before, "before"), (after, "after"))):
+            ax = axes[row, col]
+            ax.imshow(checkerboard(take(fixed.data), take(moved)), cmap="gray", interpolation="nearest",
+                      aspect=aspect, origin="lower" if row else "upper")
+            ax.set_title(f"{label}, {when}", fontsize=8)
+            ax.set_axis_off()
+    a, t = registration.transform.angles_deg, registration.transform.translation
+    flag = "" if registration.ok else "\nFLAGGED: " + registration.reason[:110]
+    fig.suptitle(f"{title}\n{registration.method}: angles ({a[0]:.2f}, {a[1]:.2f}, {a[2]:.2f}) deg, translation "
+                 f"({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}) mm, {registration.seconds:.2f} s{flag}", fontsize=8,
+                 color="#b00" if flag else "k")
+    fig.subplots_adjust(left=0.02, right=0.98, top=0.92, bottom=0.02, wspace=0.05, hspace=0.12)
+    return fig
+
+
 class OverlayParams(Params):
     name: str = Field("overlays", **_NAME)
     max_items: int = Field(12, ge=1, description="draw at most this many items")
@@ -380,11 +413,15 @@ def registration_table_report(experiment, results, params: RegistrationTablePara
         for k, reg in enumerate(regs):
             ev = next((e for e in evals if e.method == reg.method), None)
             t = reg.transform
-            row = {"item": r.item_id, "input": _label(r), "method": reg.method, "tx": t.tx, "ty": t.ty,
-                   "angle": t.angle}
+            row = {"item": r.item_id, "input": _label(r), "method": reg.method}
+            if hasattr(t, "angles_deg"):  # a 3D registration: six parameters (degrees, mm)
+                row.update(dict(zip(("angle_x", "angle_y", "angle_z", "tx", "ty", "tz"),
+                                    (*t.angles_deg, *map(float, t.translation)))))
+            else:
+                row.update({"tx": t.tx, "ty": t.ty, "angle": t.angle})
             if ev is not None:
-                row.update({"true_tx": ev.truth["tx"], "true_ty": ev.truth["ty"], "true_angle": ev.truth["angle"],
-                            "d_tx": ev.d_tx, "d_ty": ev.d_ty, "d_angle": ev.d_angle, "tre_mean": ev.tre_mean,
+                row.update({f"true_{k}": v for k, v in ev.truth.items() if not k.startswith("c")})
+                row.update({"d_tx": ev.d_tx, "d_ty": ev.d_ty, "d_angle": ev.d_angle, "tre_mean": ev.tre_mean,
                             "tre_max": ev.tre_max, "success": ev.success})
             row.update({"ok": reg.ok, "reason": reg.reason, "iterations": reg.iterations,
                         "evaluations": reg.evaluations, "seconds": reg.seconds})

@@ -73,6 +73,16 @@ IMAGE_CHAIN = [
     "register_sitk", {"landscape": {"points": 5}},
 ]
 
+VOLUME = ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz"
+FAST_3D = {"schedule": [{"spacing": 8.0, "iterations": 10, "samples": 2000}], "start": {"steps": 0},
+           "check": {"search": False}}
+VOLUME_CHAIN = [
+    "load_volume", {"misalign_volume": {"index": 1, "seed": 4, "multimodal": True}},
+    {"register_3d": FAST_3D}, "evaluate_3d",
+    {"register_sitk_3d": {"shrink": [4], "smoothing": [2.0], "iterations": 5}},
+]
+VOLUME_PAIR_CHAIN = ["load_volume_pair", {"register_3d": FAST_3D}]
+
 
 def _items(tmp_path):
     meshes = build_experiment({"name": "all-mesh-stages", "inputs": {"meshes": [str(BUNDLED_MESHES / "torus.off")]},
@@ -81,7 +91,11 @@ def _items(tmp_path):
         {"fixed": str(ITK_DIR / "BrainProtonDensitySlice.png"), "moving": str(ITK_DIR / "BrainT1Slice.png"),
          "truth": {"tx": 0.0, "ty": 0.0, "angle": 0.0}}]},
         "stages": IMAGE_CHAIN, "executor": {"workers": 1}})
-    return meshes.items() + images.items()
+    volumes = build_experiment({"name": "all-volume-stages", "inputs": {"images": [str(VOLUME)]},
+                                "stages": VOLUME_CHAIN, "executor": {"workers": 1}})
+    volume_pairs = build_experiment({"name": "volume-pair-stages", "inputs": {"pairs": [
+        {"fixed": str(VOLUME), "moving": str(VOLUME)}]}, "stages": VOLUME_PAIR_CHAIN, "executor": {"workers": 1}})
+    return meshes.items() + images.items() + volumes.items() + volume_pairs.items()
 
 
 def _nan_equal(a: dict, b: dict) -> bool:

@@ -80,3 +80,66 @@ def test_cli_bad_inputs(capsys, itk_dir, tmp_path):
     code, _, err = register_cli(capsys, png, tmp_path / "broken.png")
     assert code == 1 and "broken.png: cannot read image" in err
     assert "Traceback" not in err
+
+
+@pytest.fixture(scope="module")
+def volume_pair(tmp_path_factory):
+    """A small fixed volume (KmeansTest at 4 x 4 x 3 mm, .nii.gz) and a moved, T2-like, NRRD copy; the true T."""
+    import SimpleITK as sitk
+
+    from topomatch.stages.registration.misalign3d import make_case
+    from topomatch.stages.registration.volume_io import read_volume, volume_to_sitk
+
+    folder = tmp_path_factory.mktemp("volumes")
+    case = make_case(read_volume(REPO_ROOT / "data/images/itk/KmeansTest_T1UCharRaw.nii.gz").shrink((2, 2, 1)), 3,
+                     seed=21, multimodal=True, crop=False)
+    sitk.WriteImage(volume_to_sitk(case.fixed), str(folder / "fixed.nii.gz"))
+    sitk.WriteImage(sitk.Cast(volume_to_sitk(case.moving), sitk.sitkInt16), str(folder / "moving.nrrd"))
+    return folder / "fixed.nii.gz", folder / "moving.nrrd", case
+
+
+def test_cli_3d_json_matrix_tfm_and_resampled_geometry(capsys, volume_pair, tmp_path):
+    import SimpleITK as sitk
+
+    from topomatch.stages.registration.misalign3d import mean_tre
+    from topomatch.stages.registration.transform3d import RigidTransform3D
+
+    fixed, moving, case = volume_pair
+    code, out, _ = register_cli(capsys, fixed, moving, "--json", "--out", tmp_path / "out")
+    assert code == 0
+    res = json.loads(out)
+    assert res["dimension"] == 3 and res["ok"] and len(res["parameters"]) == 6
+    estimate = RigidTransform3D(res["parameters"], res["center"])
+    assert mean_tre(case.truth, estimate, case.fixed) < 1.0
+    np.testing.assert_allclose(res["center"], case.fixed.center, atol=1e-6)
+    # the matrix is SimpleITK's Euler3DTransform of the printed parameters, and what transform.tfm holds
+    e = sitk.Euler3DTransform(res["center"], *res["parameters"][:3], res["parameters"][3:])
+    pts = np.array([[10.0, -20.0, 30.0], [0.0, 0.0, 0.0]])
+    M = np.asarray(res["matrix"])
+    np.testing.assert_allclose(pts @ M[:3, :3].T + M[:3, 3], [e.TransformPoint(tuple(p)) for p in pts], atol=1e-6)
+    read = sitk.ReadTransform(str(tmp_path / "out" / "transform.tfm"))
+    np.testing.assert_allclose([read.TransformPoint(tuple(p)) for p in pts], [e.TransformPoint(tuple(p)) for p in pts],
+                               atol=1e-6)
+    resampled, f = sitk.ReadImage(str(tmp_path / "out" / "moving_resampled.nrrd")), sitk.ReadImage(str(fixed))
+    assert resampled.GetSize() == f.GetSize() and resampled.GetPixelID() == sitk.sitkInt16
+    np.testing.assert_allclose(resampled.GetSpacing(), f.GetSpacing())
+    np.testing.assert_allclose(resampled.GetOrigin(), f.GetOrigin(), atol=1e-6)
+    np.testing.assert_allclose(resampled.GetDirection(), f.GetDirection())
+    assert (tmp_path / "out" / "overlay.png").stat().st_size > 20_000
+    assert json.loads((tmp_path / "out" / "registration.json").read_text())["matrix"] == res["matrix"]
+
+
+def test_cli_3d_bad_inputs(capsys, volume_pair, itk_dir, tmp_path):
+    import nibabel as nib
+
+    fixed, _, _ = volume_pair
+    code, _, err = register_cli(capsys, fixed, itk_dir / "BrainT1Slice.png")
+    assert code == 1 and "BrainT1Slice.png" in err and "different dimensionality" in err
+    nib.save(nib.Nifti1Image(np.random.default_rng(0).normal(size=(8, 8, 8, 2)).astype(np.float32), np.eye(4)),
+             tmp_path / "series.nii.gz")
+    code, _, err = register_cli(capsys, fixed, tmp_path / "series.nii.gz")
+    assert code == 1 and "series.nii.gz: is a 4D image" in err
+    nib.save(nib.Nifti1Image(np.zeros((8, 8, 8), np.int16), np.eye(4)), tmp_path / "zero.nii")
+    code, _, err = register_cli(capsys, tmp_path / "zero.nii", fixed)
+    assert code == 1 and "zero.nii: image is constant" in err
+    assert "Traceback" not in err

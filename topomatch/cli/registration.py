@@ -1,4 +1,11 @@
-"""``topomatch register FIXED MOVING``: rigid registration of two images, without a config file.
+"""``topomatch register FIXED MOVING``: rigid registration of two images or two volumes, without a config file.
+
+Two 3D volumes (NIfTI, MetaImage, NRRD, DICOM file or series folder) without ``--fixed-slice`` /
+``--moving-slice`` are registered in 3D (:func:`topomatch.registration.register_volumes_with`): the
+summary or ``--json`` object is :class:`topomatch.registration.VolumeRegistrationOutcome`'s fields
+(six parameters, centre and the 4 x 4 fixed-to-moving ``matrix`` in physical LPS mm), and ``--out``
+writes the moving volume resampled onto the fixed grid, ``transform.tfm``, an overlay figure and
+``registration.json`` (:func:`topomatch.registration.write_volume_registration_files`).
 
 Options come from the ``load_pair`` and ``register`` params (:data:`topomatch.registration.REGISTER_OPTIONS`);
 the summary or ``--json`` object is :class:`topomatch.registration.RegistrationOutcome`'s fields.
@@ -37,30 +44,43 @@ def _options() -> list[Option]:
 
 def add_parsers(sub) -> None:
     command(sub, "register", help="rigidly register a moving image to a fixed image",
-            description="Rigid 2D registration (tx, ty, angle) of MOVING to FIXED by an entropic measure "
-                        "(Jensen-Tsallis by default, thesis ch. 2) with coarse-to-fine SPSA. Prints the transform "
-                        "in ITK's convention: T(x) = R(angle)(x - c) + c + t, x = (column, row) pixels, "
-                        "c = ((W-1)/2, (H-1)/2) of FIXED, moving(T(x)) ~ fixed(x).",
+            description="Rigid registration of MOVING to FIXED by an entropic measure (Jensen-Tsallis by default, "
+                        "thesis ch. 2) with coarse-to-fine SPSA. 2D images: (tx, ty, angle) in ITK's convention, "
+                        "T(x) = R(angle)(x - c) + c + t, x = (column, row) pixels, c = ((W-1)/2, (H-1)/2) of FIXED, "
+                        "moving(T(x)) ~ fixed(x). Two 3D volumes (NIfTI, MetaImage, NRRD, DICOM folder): six "
+                        "parameters of SimpleITK's Euler3DTransform about the fixed volume's centre, in physical LPS "
+                        "mm, and the 4 x 4 fixed-to-moving matrix.",
             handler=cmd_register, build=_arguments)
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("fixed", help="fixed (reference) image: PNG, TIFF, NIfTI, DICOM, MetaImage")
-    p.add_argument("moving", help="moving (target) image")
+    p.add_argument("fixed", help="fixed (reference) image or volume: PNG, TIFF, NIfTI, DICOM (file or series folder), "
+                                 "MetaImage, NRRD")
+    p.add_argument("moving", help="moving (target) image or volume")
     add_options(p, _models(), _options())
-    p.add_argument("--out", type=path_argument, metavar="DIR", help="write moving_resampled.png/.tif, overlay.png and registration.json")
+    p.add_argument("--out", type=path_argument, metavar="DIR", help="write moving_resampled.png/.tif (3D: the moving volume "
+                   "resampled on the fixed grid, and transform.tfm), overlay.png and registration.json")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 
 def cmd_register(args: argparse.Namespace) -> int:
-    from topomatch.registration import register_with, write_registration_files
+    from topomatch.registration import (
+        VolumeRegistrationOutcome,
+        register_with,
+        write_registration_files,
+        write_volume_registration_files,
+    )
 
     outcome = register_with(args.fixed, args.moving, given_options(args, _models(), _options()))
     summary = outcome.to_dict()
+    volumes = isinstance(outcome, VolumeRegistrationOutcome)
     if args.out:
-        summary["files"] = write_registration_files(outcome, args.out)
-    print_result(summary, as_json=args.json, keys=("tx", "ty", "angle", "objective", "iterations", "seconds", "ok",
-                                                   "reason", "method", "center", "files"))
+        write = write_volume_registration_files if volumes else write_registration_files
+        summary["files"] = write(outcome, args.out)
+    keys = (("angles", "translation", "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok",
+             "reason", "method", "files") if volumes else
+            ("tx", "ty", "angle", "objective", "iterations", "seconds", "ok", "reason", "method", "center", "files"))
+    print_result(summary, as_json=args.json, keys=keys)
     if not outcome.ok:
         raise RegistrationFlagged(f"registration flagged: {outcome.reason}")
     return 0

@@ -1,0 +1,150 @@
+"""3D rigid registration: conventions against SimpleITK, known transforms recovered, determinism, self-check."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from tests_paths import ITK_DIR
+
+SimpleITK = pytest.importorskip("SimpleITK")
+
+
+@pytest.fixture(scope="module")
+def small_t1():
+    """The bundled KmeansTest T1 volume (128 x 128 x 62 voxels of 2 x 2 x 3 mm) block-averaged to 4 x 4 x 3 mm."""
+    from topomatch.stages.registration.volume_io import read_volume
+
+    return read_volume(ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz").shrink((2, 2, 1))
+
+
+def _sitk_image(shape=(6, 7, 8), spacing=(0.9, 1.3, 2.5), origin=(3.0, -7.0, 11.0), angle=0.4):
+    import SimpleITK as sitk
+
+    img = sitk.GetImageFromArray(np.arange(np.prod(shape), dtype=np.float32).reshape(shape))
+    img.SetSpacing(spacing)
+    img.SetOrigin(origin)
+    c, s = math.cos(angle), math.sin(angle)
+    img.SetDirection((c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0))
+    return img
+
+
+def test_volume_geometry_matches_simpleitk():
+    from topomatch.stages.registration.volume_io import volume_from_sitk
+
+    img = _sitk_image()
+    vol = volume_from_sitk(img)
+    idx = np.array([[0, 0, 0], [1.5, 2.25, 3.0], [7, 6, 5]], dtype=float)
+    ours = vol.physical(idx)
+    theirs = np.array([img.TransformContinuousIndexToPhysicalPoint(tuple(i)) for i in idx])
+    np.testing.assert_allclose(ours, theirs, atol=1e-12)
+    np.testing.assert_allclose(vol.continuous_index(ours), idx, atol=1e-12)
+    corner = np.array(img.TransformContinuousIndexToPhysicalPoint((7.0, 6.0, 5.0)))
+    np.testing.assert_allclose(vol.center, (np.asarray(img.GetOrigin()) + corner) / 2, atol=1e-12)
+    # shrinking keeps the physical position of each block's centre
+    half = vol.shrink((2, 2, 1))
+    np.testing.assert_allclose(half.physical(np.zeros((1, 3)))[0], vol.physical(np.array([[0.5, 0.5, 0.0]]))[0])
+    assert half.spacing == (1.8, 2.6, 2.5) and half.shape == (6, 3, 4)
+
+
+def test_transform_matrix_equals_simpleitk_euler3d():
+    from topomatch.stages.registration.transform3d import RigidTransform3D, euler_angles
+
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        params = tuple(rng.uniform(-0.5, 0.5, 3)) + tuple(rng.uniform(-20, 20, 3))
+        center = tuple(rng.uniform(-50, 50, 3))
+        t = RigidTransform3D(params, center)
+        e = SimpleITK.Euler3DTransform(center, *params[:3], params[3:])
+        M = np.eye(4)
+        M[:3, :3] = np.reshape(e.GetMatrix(), (3, 3))
+        M[:3, 3] = np.asarray(e.GetTranslation()) + np.asarray(center) - M[:3, :3] @ np.asarray(center)
+        np.testing.assert_allclose(t.matrix4(), M, atol=1e-12)
+        pts = rng.normal(0, 60, (4, 3))
+        np.testing.assert_allclose(t.apply(pts), [e.TransformPoint(tuple(p)) for p in pts], atol=1e-10)
+        np.testing.assert_allclose(euler_angles(t.rotation), params[:3], atol=1e-12)
+        np.testing.assert_allclose(t.inverse().apply(t.apply(pts)), pts, atol=1e-10)
+        np.testing.assert_allclose(t.with_center((1.0, 2.0, 3.0)).matrix4(), t.matrix4(), atol=1e-12)
+
+
+def test_tfm_round_trip(tmp_path):
+    from topomatch.stages.registration.transform3d import RigidTransform3D
+    from topomatch.stages.registration.volume_io import write_transform
+
+    t = RigidTransform3D((0.1, -0.2, 0.05, 4.0, -3.0, 7.5), (10.0, 20.0, -5.0))
+    write_transform(t, tmp_path / "t.tfm")
+    back = RigidTransform3D.from_sitk(SimpleITK.ReadTransform(str(tmp_path / "t.tfm")), t.center)
+    np.testing.assert_allclose(back.params, t.params, atol=1e-9)
+    np.testing.assert_allclose(back.matrix4(), t.matrix4(), atol=1e-9)
+
+
+def test_histogram_samples_outside_are_dropped_and_mass_is_kept(small_t1):
+    from topomatch.stages.registration.histogram import Binning
+    from topomatch.stages.registration.histogram3d import VolumeHistogram
+
+    jh = VolumeHistogram(small_t1, small_t1, Binning.of(small_t1.data, 16), Binning.of(small_t1.data, 16),
+                         center=small_t1.center, samples=3000, seed=1)
+    h, n = jh(np.zeros(6))
+    assert n == jh.n_samples == 3000 and h.sum() == pytest.approx(3000)
+    far = np.array([0, 0, 0, 1000.0, 0, 0])
+    assert jh(far)[1] == 0 and jh.overlap(far) == 0.0
+    half = jh(np.array([0, 0, 0, 0.5 * small_t1.size[0] * small_t1.spacing[0], 0, 0]))
+    assert 0 < half[1] < n and half[0].sum() == pytest.approx(half[1])
+
+
+@pytest.mark.parametrize("index,multimodal,crop", [(0, False, False), (1, True, True)])
+def test_known_transform_recovered(small_t1, index, multimodal, crop):
+    from topomatch.stages.registration.misalign3d import make_case, mean_tre
+    from topomatch.stages.registration.register3d import register_volumes
+
+    case = make_case(small_t1, index, seed=11, multimodal=multimodal, crop=crop)
+    reg = register_volumes(case.fixed, case.moving)
+    tre = mean_tre(case.truth, reg.transform, case.fixed)
+    assert tre < 1.0, (tre, reg.reason)
+    assert reg.ok, reg.reason
+    assert reg.transform.center == tuple(case.fixed.center)
+
+
+def test_same_seed_same_result(small_t1):
+    from topomatch.stages.registration.misalign3d import make_case
+    from topomatch.stages.registration.register3d import Register3DParams, register_volumes
+
+    case = make_case(small_t1, 2, seed=5, multimodal=False, crop=False)
+    params = Register3DParams(check={"search": False})
+    assert register_volumes(case.fixed, case.moving, params).transform.params == \
+        register_volumes(case.fixed, case.moving, params).transform.params
+
+
+def test_no_overlap_after_initialisation_is_flagged(small_t1):
+    from topomatch.stages.registration.register3d import Register3DParams, register_volumes
+    from topomatch.stages.registration.volume import Volume
+
+    rng = np.random.default_rng(0)
+    tiny = Volume(rng.normal(size=(4, 4, 4)), (1.0, 1.0, 1.0), tuple(np.asarray(small_t1.center) + 500.0))
+    reg = register_volumes(small_t1, tiny, Register3DParams(transform={"init": "geometry"}))
+    assert not reg.ok and "overlap" in reg.reason
+
+
+def test_unrelated_content_is_flagged(small_t1):
+    from topomatch.stages.registration.register3d import register_volumes
+
+    rng = np.random.default_rng(1)
+    noise = small_t1.with_data(rng.normal(size=small_t1.shape))
+    reg = register_volumes(small_t1, noise)
+    assert not reg.ok, reg.summary()
+
+
+def test_api_registers_volumes_in_memory_and_refuses_mixed_inputs(small_t1):
+    import topomatch
+    from topomatch.stages.registration.misalign3d import make_case, mean_tre
+    from topomatch.stages.registration.transform3d import RigidTransform3D
+
+    case = make_case(small_t1, 4, seed=8, multimodal=False, crop=False)
+    out = topomatch.register(case.fixed, case.moving, metric="mi", seed=3)
+    assert isinstance(out, topomatch.VolumeRegistrationOutcome) and out.dimension == 3 and out.metric == "mi"
+    assert mean_tre(case.truth, RigidTransform3D(out.parameters, out.center), case.fixed) < 1.0
+    np.testing.assert_allclose(np.asarray(out.matrix), out.registration.transform.matrix4(), atol=1e-8)
+    with pytest.raises(topomatch.InputError, match="both volumes as files or both as Volume objects"):
+        topomatch.register(case.fixed, ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz")
