@@ -1,12 +1,12 @@
 """Interactive slice viewer of a registration for the run pages: fixed and moving with an opacity slider.
 
-For a 2D pair one view, for a volume three orthogonal slices (array axes k, j, i: axial, coronal,
-sagittal for an axial acquisition) with a slider each; for every view the moving image resampled
+For a 2D pair one view, for a volume three orthogonal slices (array axes k, j, i; which is axial
+depends on the acquisition, so they are named by axis) with a slider each; for every view the moving image resampled
 on the fixed grid **before** (the files' own placement) or **after** the registration, blended
 over the fixed image by an **opacity** slider, in grey (cross-fade) or in colour (fixed magenta,
 moving green: grey where they agree). Written by hand in a few lines of plain JavaScript on
 canvases (no library: a blend of two 8-bit images is all it draws); the images travel in the page
-as base64 bytes, each axis reduced to at most ``MAX_SIDE`` samples, so the page works offline
+as base64 bytes, each axis reduced to at most ``MAX_SIDE`` samples (``MAX_SAMPLES`` in all), so the page works offline
 from the run folder.
 """
 
@@ -21,8 +21,10 @@ from pydantic import Field
 
 from topomatch.pipeline.contract import Params, ReportOutput, report
 
-#: Largest number of samples per axis kept in a page.
+#: Largest number of samples per axis, and in all, kept in a page (a volume of 128 x 128 x 62 voxels
+#: becomes about 300,000 samples: three images of that size travel as about 1.2 MB of base64).
 MAX_SIDE = 160
+MAX_SAMPLES = 300_000
 
 _SCRIPT = """
 <script>(function(){
@@ -76,7 +78,11 @@ def slice_viewer(fixed: np.ndarray, before: np.ndarray, after: np.ndarray, spaci
     if fixed.ndim not in (2, 3) or before.shape != fixed.shape or after.shape != fixed.shape:
         raise ValueError(f"slice_viewer: fixed {fixed.shape}, before {before.shape}, after {after.shape}: "
                          "need three 2D or three 3D arrays of one shape")
-    step = tuple(max(1, -(-s // MAX_SIDE)) for s in fixed.shape)
+    step = [max(1, -(-s // MAX_SIDE)) for s in fixed.shape]
+    while np.prod([-(-s // k) for s, k in zip(fixed.shape, step)]) > MAX_SAMPLES:  # thin the longest axis
+        longest = int(np.argmax([s * sp / k for s, sp, k in zip(fixed.shape, spacing, step)]))
+        step[longest] += 1
+    step = tuple(step)
     fixed, before, after = (_reduced(a, step) for a in (fixed, np.asarray(before), np.asarray(after)))
     spacing = [float(s) * k for s, k in zip(spacing, step)]
     lo, hi = (float(np.percentile(fixed, q)) for q in (0.5, 99.5))
@@ -84,9 +90,9 @@ def slice_viewer(fixed: np.ndarray, before: np.ndarray, after: np.ndarray, spaci
     payload = {"shape": list(fixed.shape), "spacing": spacing, "fixed": _bytes(fixed, lo, hi),
                "before": _bytes(before, mlo, mhi), "after": _bytes(after, mlo, mhi)}
     views = [(fixed.shape[1], fixed.shape[0], spacing[1], spacing[0], "")] if fixed.ndim == 2 else [
-        (fixed.shape[2], fixed.shape[1], spacing[2], spacing[1], "axial (k)"),
-        (fixed.shape[2], fixed.shape[0], spacing[2], spacing[0], "coronal (j)"),
-        (fixed.shape[1], fixed.shape[0], spacing[1], spacing[0], "sagittal (i)")]
+        (fixed.shape[2], fixed.shape[1], spacing[2], spacing[1], "k (array axis 0)"),
+        (fixed.shape[2], fixed.shape[0], spacing[2], spacing[0], "j (array axis 1)"),
+        (fixed.shape[1], fixed.shape[0], spacing[1], spacing[0], "i (array axis 2)")]
     panels = []
     for k, (w, h, sx, sy, label) in enumerate(views):
         scale = 320 / max(w * sx, h * sy)
@@ -127,13 +133,25 @@ def registration_viewer_report(experiment, results, params: SliceViewerParams) -
                 and params.method in res.registration.method]
         if not regs:
             continue
-        identity = RigidTransform.for_image(fixed.shape).with_center(fixed.center)
-        before = resample(moving, identity, fixed.shape)
-        after = resample(moving, regs[-1].transform, fixed.shape)
         t = regs[-1].transform
-        title = f"{r.input_label or r.item_id}: {regs[-1].method}, tx={t.tx:.2f} ty={t.ty:.2f} angle={t.angle:.2f}"
-        fragments.append(slice_viewer(fixed.data, before, after, fixed.spacing, title,
-                                      f"{params.name}-{len(fragments)}"))
+        if np.ndim(fixed.data) == 3:  # a volume: physical-space resampling, spacing given as (x, y, z)
+            from topomatch.stages.registration.misalign3d import resample_volume
+            from topomatch.stages.registration.transform3d import RigidTransform3D
+
+            fill = float(moving.data.min())
+            before = resample_volume(moving, RigidTransform3D(center=tuple(fixed.center)), fixed, fill=fill)
+            after = resample_volume(moving, t, fixed, fill=fill)
+            spacing = tuple(reversed(fixed.spacing))
+            a, shift = t.angles_deg, t.translation
+            what = (f"angles ({a[0]:.2f}, {a[1]:.2f}, {a[2]:.2f}) deg, translation ({shift[0]:.2f}, {shift[1]:.2f}, "
+                    f"{shift[2]:.2f}) mm")
+        else:
+            identity = RigidTransform.for_image(fixed.shape).with_center(fixed.center)
+            before = resample(moving, identity, fixed.shape)
+            after = resample(moving, t, fixed.shape)
+            spacing, what = fixed.spacing, f"tx={t.tx:.2f} ty={t.ty:.2f} angle={t.angle:.2f}"
+        title = f"{r.input_label or r.item_id}: {regs[-1].method}, {what}"
+        fragments.append(slice_viewer(fixed.data, before, after, spacing, title, f"{params.name}-{len(fragments)}"))
         if len(fragments) == params.max_items:
             break
     if not fragments:
