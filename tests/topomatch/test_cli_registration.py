@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image as PILImage
 
+from cli_schema import check
 from topomatch.cli import main
 from tests_paths import REPO_ROOT
 
@@ -108,6 +109,7 @@ def test_cli_3d_json_matrix_tfm_and_resampled_geometry(capsys, volume_pair, tmp_
     code, out, _ = register_cli(capsys, fixed, moving, "--json", "--out", tmp_path / "out")
     assert code == 0
     res = json.loads(out)
+    check(res, "register")  # the documented --json schema covers 3D results too
     assert res["dimension"] == 3 and res["ok"] and len(res["parameters"]) == 6
     estimate = RigidTransform3D(res["parameters"], res["center"])
     assert mean_tre(case.truth, estimate, case.fixed) < 1.0
