@@ -307,8 +307,11 @@ def _to_uint8(data: np.ndarray, reference: np.ndarray) -> np.ndarray:
 
 def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> list[str]:
     """The moving image resampled onto the fixed grid (``moving_resampled.png`` 8-bit and ``.tif``
-    float32), ``overlay.png`` and ``registration.json`` (the JSON fields and the optimiser's
-    history) in ``out``; returns their paths."""
+    float32, and in the moving file's own format when it is NIfTI, MetaImage or NRRD, with the fixed
+    image's spacing), ``transform.tfm`` (SimpleITK's Euler2DTransform of the result, in the pixel
+    coordinates x = (column, row) the registration works in: physical coordinates for images of unit
+    spacing and zero origin, such as PNG), ``overlay.png`` and ``registration.json`` (the JSON fields
+    and the optimiser's history) in ``out``; returns their paths."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -335,7 +338,34 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     atomic_write_bytes(paths[2], buf.getvalue())
     history = {k: np.asarray(v).tolist() for k, v in reg.history.items()}
     atomic_write_text(paths[3], json.dumps({**outcome.to_dict(), "history": history}, default=str))
-    return [str(p) for p in paths]
+    return [str(p) for p in paths] + _write_sitk_files(outcome, resampled, out)
+
+
+def _write_sitk_files(outcome: RegistrationOutcome, resampled: np.ndarray, out: Path) -> list[str]:
+    """``transform.tfm`` and, for a NIfTI / MetaImage / NRRD moving file, ``moving_resampled`` in that format."""
+    import math
+
+    import SimpleITK as sitk
+
+    from topomatch.stages.registration.io import NIFTI_SUFFIXES, SITK_SUFFIXES, image_format
+    from topomatch.stages.registration.volume_io import keep_locale
+
+    t = outcome.registration.transform
+    written = [out / "transform.tfm"]
+    tmp = out / ".tmp-transform.tfm"
+    sitk.WriteTransform(sitk.Euler2DTransform(tuple(map(float, t.center)), math.radians(t.angle), (t.tx, t.ty)), str(tmp))
+    tmp.replace(written[0])
+    fmt = image_format(outcome.moving) if Path(outcome.moving).is_file() else ""
+    if fmt in NIFTI_SUFFIXES or fmt in SITK_SUFFIXES and fmt not in (".dcm", ".dicom", ".ima"):
+        suffix = {".mhd": ".mha", ".nhdr": ".nrrd"}.get(fmt, fmt)
+        image = sitk.GetImageFromArray(resampled.astype(np.float32))
+        image.SetSpacing(tuple(float(s) for s in reversed(outcome.fixed_image.spacing)))  # (column, row)
+        written.append(out / f"moving_resampled{suffix}")
+        tmp = out / f".tmp-moving_resampled{suffix}"
+        with keep_locale():
+            sitk.WriteImage(image, str(tmp), True)
+        tmp.replace(written[1])
+    return [str(p) for p in written]
 
 
 def write_volume_registration_files(outcome: VolumeRegistrationOutcome, out: str | Path) -> list[str]:

@@ -145,3 +145,30 @@ def test_cli_3d_bad_inputs(capsys, volume_pair, itk_dir, tmp_path):
     code, _, err = register_cli(capsys, tmp_path / "zero.nii", fixed)
     assert code == 1 and "zero.nii: image is constant" in err
     assert "Traceback" not in err
+
+
+def test_2d_outputs_include_an_itk_transform_and_the_input_format(capsys, itk_dir, tmp_path):
+    """transform.tfm resamples the moving image with SimpleITK as our own resampling does; a NIfTI moving
+    image also gives a NIfTI resampled image with the fixed spacing."""
+    import nibabel as nib
+    import SimpleITK as sitk
+
+    fixed_png = itk_dir / "BrainProtonDensitySliceBorder20.png"
+    moving_png = itk_dir / "BrainProtonDensitySliceR10X13Y17.png"
+    code, out, _ = register_cli(capsys, fixed_png, moving_png, "--json", "--out", tmp_path / "png")
+    assert code == 0
+    files = json.loads(out)["files"]
+    assert str(tmp_path / "png" / "transform.tfm") in files
+    T = sitk.ReadTransform(str(tmp_path / "png" / "transform.tfm"))
+    fixed, moving = sitk.ReadImage(str(fixed_png), sitk.sitkFloat32), sitk.ReadImage(str(moving_png), sitk.sitkFloat32)
+    by_sitk = sitk.GetArrayFromImage(sitk.Resample(moving, fixed, T, sitk.sitkLinear, 0.0))
+    ours = np.asarray(PILImage.open(tmp_path / "png" / "moving_resampled.tif"))
+    inside = by_sitk > 0
+    assert inside.mean() > 0.5 and np.abs(by_sitk[inside] - ours[inside]).mean() < 1.0  # grey levels of 0..255
+    # NIfTI input: the resampled image comes back as NIfTI too
+    data = np.asarray(PILImage.open(moving_png), dtype=np.float32)
+    nib.save(nib.Nifti1Image(data.T[:, :, None], np.diag([1.0, 1.0, 1.0, 1.0])), tmp_path / "moving.nii.gz")
+    code, out, _ = register_cli(capsys, fixed_png, tmp_path / "moving.nii.gz", "--json", "--out", tmp_path / "nii")
+    assert code == 0 and (tmp_path / "nii" / "moving_resampled.nii.gz").is_file()
+    back = sitk.GetArrayFromImage(sitk.ReadImage(str(tmp_path / "nii" / "moving_resampled.nii.gz")))
+    assert back.shape == np.asarray(PILImage.open(fixed_png)).shape
