@@ -302,14 +302,27 @@ def overlay_rgb(fixed: np.ndarray, moving: np.ndarray) -> np.ndarray:
     return np.clip(np.stack([f, m, f], axis=-1), 0, 1)
 
 
-def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
-    """Five panels on ``axes``: fixed, moving, checkerboard before, checkerboard after, colour overlay after."""
+def before_after(fixed, moving, transform) -> tuple[np.ndarray, np.ndarray]:
+    """The moving image (or volume) on the fixed grid before (the files' own placement: identity about
+    the fixed centre) and after ``transform``; volumes are resampled in physical space, filled with the
+    moving minimum outside it."""
+    if np.ndim(fixed.data) == 3:
+        from topomatch.stages.registration.misalign3d import resample_volume
+        from topomatch.stages.registration.transform3d import RigidTransform3D
+
+        fill = float(moving.data.min())
+        return (resample_volume(moving, RigidTransform3D(center=tuple(fixed.center)), fixed, fill=fill),
+                resample_volume(moving, transform, fixed, fill=fill))
     from topomatch.stages.registration.interpolation import resample
     from topomatch.stages.registration.transform import RigidTransform
 
-    identity = RigidTransform.for_image(fixed.shape)
-    before = resample(moving, identity.with_center(fixed.center), fixed.shape)
-    after = resample(moving, registration.transform, fixed.shape)
+    identity = RigidTransform.for_image(fixed.shape).with_center(fixed.center)
+    return resample(moving, identity, fixed.shape), resample(moving, transform, fixed.shape)
+
+
+def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
+    """Five panels on ``axes``: fixed, moving, checkerboard before, checkerboard after, colour overlay after."""
+    before, after = before_after(fixed, moving, registration.transform)
     panels = [(fixed.data, "fixed"), (moving.data, "moving"), (checkerboard(fixed.data, before), "checkerboard before"),
               (checkerboard(fixed.data, after), "checkerboard after"), (overlay_rgb(fixed.data, after),
                                                                         "after: fixed magenta, moving green")]
@@ -340,12 +353,7 @@ def volume_overlay_figure(fixed, moving, registration, title: str = ""):
     identity transform) and after the registration: a figure of two columns."""
     import matplotlib.pyplot as plt
 
-    from topomatch.stages.registration.misalign3d import resample_volume
-    from topomatch.stages.registration.transform3d import RigidTransform3D
-
-    fill = float(moving.data.min())
-    before = resample_volume(moving, RigidTransform3D(center=tuple(fixed.center)), fixed, fill=fill)
-    after = resample_volume(moving, registration.transform, fixed, fill=fill)
+    before, after = before_after(fixed, moving, registration.transform)
     nk, nj, ni = fixed.shape
     sx, sy, sz = fixed.spacing
     views = [("slice k (axial)", lambda a: a[nk // 2], sy / sx), ("slice j (coronal)", lambda a: a[:, nj // 2], sz / sx),
@@ -367,6 +375,20 @@ def volume_overlay_figure(fixed, moving, registration, title: str = ""):
     return fig
 
 
+def registered_items(results, method: str, limit: int) -> list[tuple[Any, Any]]:
+    """Up to ``limit`` (item result, its last registration whose method contains ``method``) pairs of
+    the items that succeeded with a fixed and a moving image."""
+    chosen = []
+    for r in results:
+        if not r.ok or r.final("fixed") is None or r.final("moving") is None:
+            continue
+        regs = [res.registration for res in r.results.values() if hasattr(res, "registration")
+                and method in res.registration.method]
+        if regs:
+            chosen.append((r, regs[-1]))
+    return chosen[:limit]
+
+
 class OverlayParams(Params):
     name: str = Field("overlays", **_NAME)
     max_items: int = Field(12, ge=1, description="draw at most this many items")
@@ -378,15 +400,7 @@ def registration_overlay_report(experiment, results, params: OverlayParams) -> R
     """Fixed, moving, checkerboards before/after and a colour overlay after registration, per item."""
     import matplotlib.pyplot as plt
 
-    chosen = []
-    for r in results:
-        if not r.ok or r.final("fixed") is None:
-            continue
-        regs = [res.registration for _, res in r.results.items() if hasattr(res, "registration")
-                and params.method in res.registration.method]
-        if regs:
-            chosen.append((r, regs[-1]))
-    chosen = chosen[: params.max_items]
+    chosen = registered_items(results, params.method, params.max_items)
     if not chosen:
         return ReportOutput(notes=["no registered items to draw"])
     fig, axes = plt.subplots(len(chosen), 5, figsize=(16, 3.9 * len(chosen)), squeeze=False)

@@ -121,39 +121,21 @@ class SliceViewerParams(Params):
 @report("registration_viewer", params=SliceViewerParams)
 def registration_viewer_report(experiment, results, params: SliceViewerParams) -> ReportOutput:
     """Interactive viewers of registered pairs: fixed and moving (before or after) with an opacity slider."""
-    from topomatch.stages.registration.interpolation import resample
-    from topomatch.stages.registration.transform import RigidTransform
+    from topomatch.stages.registration.reports import before_after, registered_items
 
     fragments = []
-    for r in results:
-        fixed, moving = r.final("fixed"), r.final("moving")
-        if not r.ok or fixed is None or moving is None:
-            continue
-        regs = [res.registration for res in r.results.values() if hasattr(res, "registration")
-                and params.method in res.registration.method]
-        if not regs:
-            continue
-        t = regs[-1].transform
-        if np.ndim(fixed.data) == 3:  # a volume: physical-space resampling, spacing given as (x, y, z)
-            from topomatch.stages.registration.misalign3d import resample_volume
-            from topomatch.stages.registration.transform3d import RigidTransform3D
-
-            fill = float(moving.data.min())
-            before = resample_volume(moving, RigidTransform3D(center=tuple(fixed.center)), fixed, fill=fill)
-            after = resample_volume(moving, t, fixed, fill=fill)
+    for r, reg in registered_items(results, params.method, params.max_items):
+        fixed, t = r.final("fixed"), reg.transform
+        before, after = before_after(fixed, r.final("moving"), t)
+        if np.ndim(fixed.data) == 3:  # a volume: spacing given as (x, y, z)
             spacing = tuple(reversed(fixed.spacing))
             a, shift = t.angles_deg, t.translation
             what = (f"angles ({a[0]:.2f}, {a[1]:.2f}, {a[2]:.2f}) deg, translation ({shift[0]:.2f}, {shift[1]:.2f}, "
                     f"{shift[2]:.2f}) mm")
         else:
-            identity = RigidTransform.for_image(fixed.shape).with_center(fixed.center)
-            before = resample(moving, identity, fixed.shape)
-            after = resample(moving, t, fixed.shape)
             spacing, what = fixed.spacing, f"tx={t.tx:.2f} ty={t.ty:.2f} angle={t.angle:.2f}"
-        title = f"{r.input_label or r.item_id}: {regs[-1].method}, {what}"
+        title = f"{r.input_label or r.item_id}: {reg.method}, {what}"
         fragments.append(slice_viewer(fixed.data, before, after, spacing, title, f"{params.name}-{len(fragments)}"))
-        if len(fragments) == params.max_items:
-            break
     if not fragments:
         return ReportOutput(notes=["no registered pair to show"])
     return ReportOutput(html={params.name: "".join(fragments)},
