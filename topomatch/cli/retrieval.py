@@ -160,10 +160,12 @@ def cmd_index(args: argparse.Namespace) -> int:
                   f"(skipped){before} [{part.method}, {part.seconds:.1f} s of worker time]")
         print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
         if report.open_meshes:
-            print(f"{len(report.open_meshes)} meshes are open (have boundaries): the spectrum, heat kernel and "
+            n = len(report.open_meshes)
+            print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries): the spectrum, heat kernel and "
                   f"skeleton use natural (Neumann) boundary conditions")
         if report.multi_component_meshes:
-            print(f"{len(report.multi_component_meshes)} meshes have several components: the largest was indexed")
+            n = len(report.multi_component_meshes)
+            print(f"{n} {'meshes have' if n > 1 else 'mesh has'} several components: the largest was indexed")
         for part in report.parts:
             for reason in part.failures:
                 print(f"  failed ({part.method}): {reason}", file=sys.stderr)
