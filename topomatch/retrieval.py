@@ -404,7 +404,7 @@ class Collection:
     def matrix(self, method: str, descriptors: dict[str, list[Descriptor]],
                options: dict[str, Any] | None = None) -> np.ndarray:
         """Full dissimilarity matrix of ``method`` (fused and re-ranked for a fusion)."""
-        return _combined(get_method(method), self.part_matrices(method, descriptors, options))
+        return _fused(get_method(method), self.part_matrices(method, descriptors, options))[0]
 
     def query(self, mesh: str | Path, *, k: int = 10, method: str = DEFAULT_METHOD,
               options: dict[str, Any] | None = None, shortlist: bool | None = None) -> QueryResult:
@@ -414,7 +414,7 @@ class Collection:
         (:mod:`topomatch.stages.retrieval.shortlist`); None = when the index holds at least
         ``LARGE_INDEX`` shapes.
         """
-        from topomatch.stages.retrieval.fusion import fused_query
+        from topomatch.stages.retrieval.fusion import decide, fused_query
         from topomatch.stages.retrieval.ranking import dissimilarities
         from topomatch.stages.retrieval.shortlist import LARGE_INDEX
 
@@ -433,7 +433,8 @@ class Collection:
         elif m.fusion is not None:
             rows_d = [dissimilarities(query[p], descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
             mats = self.part_matrices(method, descriptors, options)
-            d, decision = fused_query(rows_d, mats, m.fusion), _decision(m, mats)
+            chosen = decide(mats, m.fusion, graph_size=len(rows) + 1)  # the query joins the graph
+            d, decision = fused_query(rows_d, mats, m.fusion, chosen), chosen.to_dict()
         else:
             d = dissimilarities(query[m.name], descriptors[m.name], m.name, self._part_options(m.name, m, options))
         order = np.argsort(d, kind="stable")[:k]
@@ -448,54 +449,60 @@ class Collection:
                   refresh: set[str] | frozenset[str] = frozenset()):
         """The approximate-nearest-neighbour shortlist of a fused method, loaded from ``<db>.ann``,
         brought up to date (new shapes added, the ``refresh`` paths re-embedded) or built, and saved."""
-        from topomatch.stages.retrieval.shortlist import sample_fusion
-
         m = get_method(method)
         rows, descriptors = self.parts(method)
+        return self._shortlist(m, rows, descriptors, options, refresh)[0]
+
+    def _shortlist(self, m: Method, rows: list[Row], descriptors: dict[str, list[Descriptor]],
+                   options: dict[str, Any] | None, refresh: set[str] | frozenset[str] = frozenset()):
+        """(shortlist, (n,) keys of ``rows``, part scales, screening decision): the saved shortlist as it is
+        when it already holds exactly these shapes with the same fusion settings; else the sample's
+        scales and screening recomputed and the graph brought up to date (or built), then saved."""
+        from topomatch.stages.retrieval.fusion import FusionDecision
+        from topomatch.stages.retrieval.shortlist import Shortlist, sample_fusion, shape_key, vector_parts
+
+        keys = np.array([shape_key(r.path) for r in rows], dtype=np.uint64)
+        path = self.db.with_name(self.db.name + ".ann")
+        ann = Shortlist.load(path)
+        settings = [m.fusion.screen, list(m.fusion.order_weights or ())]
+        current = (ann is not None and not refresh and ann.sample.get("settings") == settings and len(ann) == len(keys)
+                   and bool(np.all(ann.index.contains(keys))))
+        if current:
+            d = ann.sample["decision"]
+            return ann, keys, ann.sample["scales"], FusionDecision(tuple(d["kept"]), tuple(d["dropped"]),
+                                                                   d["agreement"], None)
         scales, decision = sample_fusion(descriptors, m.fusion, lambda p: self._part_options(p, m, options))
-        return self._shortlist(rows, descriptors, scales, decision, refresh)[0]
-
-    def _shortlist(self, rows: list[Row], descriptors: dict[str, list[Descriptor]], scales: dict[str, float],
-                   decision: Any, refresh: set[str] | frozenset[str] = frozenset()):
-        """(the shortlist of ``rows``, loaded and brought up to date or built, then saved; (n,) their keys)."""
-        from topomatch.stages.retrieval.shortlist import Shortlist, shape_key, vector_parts
-
         parts = vector_parts(decision)
         if not parts:
             raise ConfigError(f"{self.db}: the shortlist needs a vector part, and the screening kept only "
                               f"{', '.join(decision.kept)}")
-        keys = np.array([shape_key(r.path) for r in rows], dtype=np.uint64)
 
         def vectors(idx):
             return {p: np.stack([descriptors[p][i].data.ravel() for i in idx]) for p in parts}
 
-        path = self.db.with_name(self.db.name + ".ann")
-        ann = Shortlist.load(path)
         if ann is None or ann.parts != parts or any(abs(ann.scales[p] / scales[p] - 1) > 0.2 for p in parts):
-            ann, changed = Shortlist.build(keys, vectors(range(len(rows))), {p: scales[p] for p in parts}), True
+            ann = Shortlist.build(keys, vectors(range(len(rows))), {p: scales[p] for p in parts})
         else:
             stale = np.array([r.path in refresh for r in rows], dtype=bool)
             todo = np.flatnonzero(~np.asarray(ann.index.contains(keys), dtype=bool) | stale)
-            changed = len(todo) > 0
-            if changed:
+            if len(todo):
                 ann.add(keys[todo], vectors(todo))
-        if changed:
-            try:
-                ann.save(path)
-            except OSError:  # a read-only index still answers, from the graph in memory
-                pass
-        return ann, keys
+        ann.sample = {"scales": scales, "decision": decision.to_dict(), "settings": settings}
+        try:
+            ann.save(path)
+        except OSError:  # a read-only index still answers, from the graph in memory
+            pass
+        return ann, keys, scales, decision
 
     def _shortlisted(self, m: Method, rows: list[Row], descriptors: dict[str, list[Descriptor]],
                      query: dict[str, Descriptor], k: int, options: dict[str, Any] | None):
         """(n,) dissimilarities of a query, exact on its shortlist and inf elsewhere, and the fusion decision."""
-        from topomatch.stages.retrieval.shortlist import SHORTLIST, sample_fusion, shortlisted_dissimilarities
+        from topomatch.stages.retrieval.shortlist import SHORTLIST, shortlisted_dissimilarities
 
-        part_options = lambda p: self._part_options(p, m, options)  # noqa: E731
-        scales, decision = sample_fusion(descriptors, m.fusion, part_options)
-        ann, keys = self._shortlist(rows, descriptors, scales, decision)
+        ann, keys, scales, decision = self._shortlist(m, rows, descriptors, options)
         count = max(SHORTLIST, 20 * k)
-        d = shortlisted_dissimilarities(query, descriptors, m.fusion, ann, keys, scales, decision, part_options, count)
+        d = shortlisted_dissimilarities(query, descriptors, m.fusion, ann, keys, scales, decision,
+                                        lambda p: self._part_options(p, m, options), count)
         return d, {**decision.to_dict(), "rerank_k": None, "shortlist": min(count, len(rows))}
 
     def evaluate(self, *, method: str = DEFAULT_METHOD, options: dict[str, Any] | None = None,
@@ -521,25 +528,22 @@ class Collection:
         t = time.perf_counter()
         m = get_method(method)
         parts = self.part_matrices(method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, options)
-        D = _combined(m, parts)
+        D, decision = _fused(m, parts)
         seconds = time.perf_counter() - t
         metrics = retrieval_metrics(D, labels)
         np.savez_compressed(path, D=D, paths=np.array([r.path for r in rows]), labels=labels)
-        return Evaluation(method, len(rows), str(path), seconds, metrics, _decision(m, parts))
+        return Evaluation(method, len(rows), str(path), seconds, metrics, decision)
 
 
-def _combined(method: Method, part_matrices: list[np.ndarray]) -> np.ndarray:
-    """A method's (n, n) matrix from its parts' (fused and re-ranked for a fusion)."""
-    from topomatch.stages.retrieval.fusion import fused_matrix
+def _fused(method: Method, part_matrices: list[np.ndarray]) -> tuple[np.ndarray, dict[str, Any] | None]:
+    """A method's (n, n) matrix from its parts' (fused and re-ranked for a fusion), and for a fusion what
+    it did (parts kept and dropped, their agreement, re-ranking k; None otherwise)."""
+    from topomatch.stages.retrieval.fusion import decide, fused_matrix
 
-    return fused_matrix(part_matrices, method.fusion) if method.fusion is not None else part_matrices[0]
-
-
-def _decision(method: Method, part_matrices: list[np.ndarray]) -> dict[str, Any] | None:
-    """What a fusion did on a database (parts kept and dropped, their agreement, re-ranking k); None otherwise."""
-    from topomatch.stages.retrieval.fusion import decide
-
-    return decide(part_matrices, method.fusion).to_dict() if method.fusion is not None else None
+    if method.fusion is None:
+        return part_matrices[0], None
+    decision = decide(part_matrices, method.fusion)
+    return fused_matrix(part_matrices, method.fusion, decision), decision.to_dict()
 
 
 def open_index(db: str | Path) -> Collection:

@@ -218,26 +218,28 @@ def _kept(items: list, fusion: Fusion, decision: FusionDecision) -> list:
     return [x for p, x in zip(fusion.parts, items) if p in decision.kept]
 
 
-def fused_matrix(part_matrices: list[np.ndarray], fusion: Fusion) -> np.ndarray:
+def fused_matrix(part_matrices: list[np.ndarray], fusion: Fusion, decision: FusionDecision | None = None) -> np.ndarray:
     """(n, n) fused (and re-ranked) dissimilarities of a collection from its parts' (n, n) matrices
-    (what was kept and why: :func:`decide`)."""
-    decision = decide(part_matrices, fusion)
+    (what was kept and why: :func:`decide`, computed here unless given)."""
+    decision = decision or decide(part_matrices, fusion)
     mats = _kept(part_matrices, fusion, decision)
     D = fuse(mats, [median_scale(P) for P in mats], fusion.order_weights)
     k = decision.rerank_k
     return manifold_ranking(D, k, fusion.rerank_alpha) if k else D
 
 
-def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], fusion: Fusion) -> np.ndarray:
+def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], fusion: Fusion,
+                decision: FusionDecision | None = None) -> np.ndarray:
     """(n,) fused dissimilarities of one query to a database.
 
     ``query_rows``: per part, the (n,) dissimilarities of the query to the database;
     ``part_matrices``: per part, the database's (n, n) matrix (screening, scales, and the graph for
     re-ranking: the query joins the database's graph as an (n + 1)-th item). The screening looks at
-    the database alone, so every query of a database uses the same parts.
+    the database alone, so every query of a database uses the same parts: pass ``decision``
+    (``decide(part_matrices, fusion, graph_size=n + 1)``) to compute it once for many queries.
     """
     n = len(query_rows[0])
-    decision = decide(part_matrices, fusion, graph_size=n + 1)
+    decision = decision or decide(part_matrices, fusion, graph_size=n + 1)
     rows, mats = _kept(query_rows, fusion, decision), _kept(part_matrices, fusion, decision)
     scales = [median_scale(P) for P in mats]
     row = fuse(rows, scales, fusion.order_weights)

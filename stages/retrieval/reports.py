@@ -234,7 +234,7 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
     """
     import matplotlib.pyplot as plt
 
-    from topomatch.stages.retrieval.fusion import fused_query
+    from topomatch.stages.retrieval.fusion import decide, fused_query
     from topomatch.stages.retrieval.metrics import retrieval_metrics
     from topomatch.stages.retrieval.ranking import dissimilarities
 
@@ -270,7 +270,8 @@ def retrieval_robustness_report(experiment, results, params: RetrievalRobustness
                                        for p in paths])
         for name, fusion in fusions.items():
             mats = [matrices[m][1][np.ix_(idx, idx)] for m in fusion.parts]
-            single[name] = np.stack([fused_query([single[m][q] for m in fusion.parts], mats, fusion)
+            decision = decide(mats, fusion, graph_size=len(paths) + 1)  # the same database for every query
+            single[name] = np.stack([fused_query([single[m][q] for m in fusion.parts], mats, fusion, decision)
                                      for q in range(len(paths))])
         for method, Q in single.items():
             m = retrieval_metrics(Q, y).micro  # the diagonal, the query's own original, is left out

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -70,11 +70,16 @@ class Shortlist:
         Their scales (median dissimilarity over the sample).
     index : usearch.index.Index
         The graph (``len(index)`` shapes).
+    sample : dict
+        What the database's sample gave (saved with the graph, so queries do not recompute it):
+        ``scales`` of every part, the screening ``decision`` (FusionDecision.to_dict()) and the
+        fusion ``settings`` it was made with.
     """
 
     parts: tuple[str, ...]
     scales: dict[str, float]
     index: object
+    sample: dict = field(default_factory=dict)
 
     @classmethod
     def build(cls, keys: np.ndarray, vectors: dict[str, np.ndarray], scales: dict[str, float]) -> "Shortlist":
@@ -105,9 +110,10 @@ class Shortlist:
         return np.asarray(matches.keys, dtype=np.uint64)
 
     def save(self, path: Path) -> None:
-        """Write the graph to ``path`` and its parts and scales to ``path.json``."""
+        """Write the graph to ``path`` and its parts, scales and sample record to ``path.json``."""
         self.index.save(str(path))
-        Path(f"{path}.json").write_text(json.dumps({"schema": 1, "parts": list(self.parts), "scales": self.scales}))
+        Path(f"{path}.json").write_text(json.dumps({"schema": 1, "parts": list(self.parts), "scales": self.scales,
+                                                    "sample": self.sample}))
 
     @classmethod
     def load(cls, path: Path) -> "Shortlist | None":
@@ -124,7 +130,7 @@ class Shortlist:
             return None
         if index is None or info.get("schema") != 1:
             return None
-        return cls(tuple(info["parts"]), {p: float(s) for p, s in info["scales"].items()}, index)
+        return cls(tuple(info["parts"]), {p: float(s) for p, s in info["scales"].items()}, index, info.get("sample", {}))
 
 
 def sample_fusion(descriptors: dict, fusion, options) -> tuple[dict[str, float], object]:
