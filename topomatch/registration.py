@@ -348,7 +348,7 @@ def _write_sitk_files(outcome: RegistrationOutcome, resampled: np.ndarray, out: 
     import SimpleITK as sitk
 
     from topomatch.stages.registration.io import NIFTI_SUFFIXES, SITK_SUFFIXES, image_format
-    from topomatch.stages.registration.volume_io import keep_locale
+    from topomatch.stages.registration.volume_io import keep_locale, output_suffix
 
     t = outcome.registration.transform
     written = [out / "transform.tfm"]
@@ -357,7 +357,7 @@ def _write_sitk_files(outcome: RegistrationOutcome, resampled: np.ndarray, out: 
     tmp.replace(written[0])
     fmt = image_format(outcome.moving) if Path(outcome.moving).is_file() else ""
     if fmt in NIFTI_SUFFIXES or fmt in SITK_SUFFIXES and fmt not in (".dcm", ".dicom", ".ima"):
-        suffix = {".mhd": ".mha", ".nhdr": ".nrrd"}.get(fmt, fmt)
+        suffix = output_suffix(outcome.moving)
         image = sitk.GetImageFromArray(resampled.astype(np.float32))
         image.SetSpacing(tuple(float(s) for s in reversed(outcome.fixed_image.spacing)))  # (column, row)
         written.append(out / f"moving_resampled{suffix}")

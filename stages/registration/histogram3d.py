@@ -94,7 +94,6 @@ class VolumeHistogram:
         self.shape = (fixed_binning.bins, moving_binning.bins)
         self.n_cells = fixed_binning.bins * moving_binning.bins
         self.factor = 1  # for Objective (lengths here are millimetres, not level pixels)
-        self.spacing = float(np.mean(fixed.spacing))
         flat = np.flatnonzero(mask.ravel()) if mask is not None else np.arange(fixed.data.size)
         if len(flat) == 0:
             raise ValueError("the fixed mask selects no voxel")
@@ -109,8 +108,7 @@ class VolumeHistogram:
             idx = np.clip(idx, 0.0, np.array([[ni - 1.0], [nj - 1.0], [nk - 1.0]]))
         values, _ = trilinear(fixed.data, idx)
         self.n_samples = idx.shape[1]
-        self.points = fixed.physical(idx.T)  # (n, 3) physical sample positions
-        self._P = np.ascontiguousarray((self.points - self.center).T)  # (3, n) relative to the centre
+        self._P = np.ascontiguousarray((fixed.physical(idx.T) - self.center).T)  # (3, n) sample positions, about c
         self.fixed_bins = fixed_binning.index(values)
         self._fbk = self.fixed_bins * moving_binning.bins
         self.moving = moving

@@ -21,8 +21,8 @@ from pydantic import Field
 from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.registration.histogram3d import trilinear
 from topomatch.stages.registration.search import otsu_threshold
-from topomatch.stages.registration.transform3d import RigidTransform3D
-from topomatch.stages.registration.volume import Volume
+from topomatch.stages.registration.transform3d import RigidTransform3D, target_registration_error
+from topomatch.stages.registration.volume import Volume, foreground_mask
 
 
 def resample_volume(moving: Volume, transform: RigidTransform3D, reference: Volume, *, fill: float = 0.0,
@@ -113,12 +113,11 @@ def mean_tre(truth: RigidTransform3D, estimate: RigidTransform3D, fixed: Volume,
              max_points: int = 50000) -> float:
     """Mean target registration error (mm) over the fixed voxels of ``mask`` (default: Otsu foreground)."""
     if mask is None:
-        mask = fixed.data > otsu_threshold(fixed.data)
+        mask = foreground_mask(fixed)
     flat = np.flatnonzero(mask.ravel())
     if len(flat) > max_points:
         flat = flat[:: int(math.ceil(len(flat) / max_points))]
-    pts = fixed.voxel_points(flat)
-    return float(np.mean(np.linalg.norm(truth.apply(pts) - estimate.apply(pts), axis=1)))
+    return float(np.mean(target_registration_error(truth, estimate, fixed.voxel_points(flat))))
 
 
 # --------------------------------------------------------------------------- stages (configs)
@@ -190,9 +189,8 @@ def evaluate_3d(fixed: Volume, registration, truth, *, params: Evaluate3DParams)
 
     true_t = truth_transform_3d(truth)
     est = registration.transform.with_center(true_t.center)
-    mask = fixed.data > otsu_threshold(fixed.data)
-    pts = fixed.voxel_points(np.flatnonzero(mask.ravel())[::7])
-    tre = np.linalg.norm(true_t.apply(pts) - est.apply(pts), axis=1)
+    pts = fixed.voxel_points(np.flatnonzero(foreground_mask(fixed).ravel())[::7])
+    tre = target_registration_error(true_t, est, pts)
     dR = est.rotation @ true_t.rotation.T
     d_angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(dR) - 1.0) / 2.0))))
     dt = est.translation - true_t.translation

@@ -281,16 +281,16 @@ class _Run3D:
         elif params.sample_mask == "foreground":
             fixed_mask = foreground_mask(fixed)
         m = params.metric
-        fb, mb = Binning, Binning
+        mask_volume = None if fixed_mask is None else fixed.with_data(fixed_mask.astype(np.float64))
         self.levels: list[_Level] = []
         for i, spec in enumerate(params.schedule):
             F, M = _level_volume(fixed, spec.spacing), _level_volume(moving, spec.spacing)
-            mask = None if fixed_mask is None else _level_volume(fixed.with_data(fixed_mask.astype(np.float64)),
-                                                                  spec.spacing).data >= 0.5
+            mask = None if mask_volume is None else _level_volume(mask_volume, spec.spacing).data >= 0.5
             if mask is not None and not mask.any():
                 mask = None
-            jh = VolumeHistogram(F, M, fb.of(fixed.data, spec.bins), mb.of(moving.data, spec.bins), center=self.center,
-                                 samples=spec.samples, mask=mask, jitter=params.jitter, seed=params.seed + i)
+            jh = VolumeHistogram(F, M, Binning.of(fixed.data, spec.bins), Binning.of(moving.data, spec.bins),
+                                 center=self.center, samples=spec.samples, mask=mask, jitter=params.jitter,
+                                 seed=params.seed + i)
             obj = Objective(jh, m.name, alpha=m.alpha, weights=m.weights, tmi_form=m.tmi_form, min_overlap=m.min_overlap)
             self.levels.append(_Level(spec, obj, float(np.mean(F.spacing))))
         # a level with too few samples (a small field of view shrunk a lot) has a measure dominated by chance and

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from topomatch.pipeline.contract import InputError, Params, StageResult, stage
-from topomatch.stages.registration.io import PILLOW_SUFFIXES, _check_size, check_pixels, image_format
+from topomatch.stages.registration.io import PILLOW_SUFFIXES, _check_size, _stem, check_pixels, image_format
 from topomatch.stages.registration.transform3d import RigidTransform3D
 from topomatch.stages.registration.volume import Volume
 
@@ -156,13 +156,7 @@ def volume_to_sitk(volume: Volume, data: np.ndarray | None = None):
 
 
 def _name(path: Path) -> str:
-    if path.is_dir():
-        return path.name
-    lower = path.name.lower()
-    for suffix in sorted(VOLUME_SUFFIXES, key=len, reverse=True):
-        if lower.endswith(suffix):
-            return path.name[: -len(suffix)]
-    return path.stem
+    return path.name if path.is_dir() else _stem(path)
 
 
 def read_volume(path: str | Path) -> Volume:
