@@ -11,15 +11,17 @@ from pathlib import Path
 
 
 class TopomatchError(Exception):
-    """Base class of the errors the CLI reports as a short message."""
+    """Base class of the errors the CLI reports as a short message (``kind``: the ``--json`` error's kind)."""
 
     exit_code = 1
+    kind = "error"
 
 
 class ConfigError(TopomatchError):
     """A malformed or invalid experiment config, CLI override or parameter set."""
 
     exit_code = 2
+    kind = "config"
 
 
 class InputError(TopomatchError):
@@ -27,6 +29,8 @@ class InputError(TopomatchError):
 
     The message always names the file.
     """
+
+    kind = "input"
 
     def __init__(self, path: str | Path | None, problem: str):
         self.path = None if path is None else str(path)
@@ -37,6 +41,10 @@ class InputError(TopomatchError):
 class StageError(TopomatchError):
     """A stage that cannot produce a result for a valid input (e.g. a solver failure)."""
 
+    kind = "stage"
+
 
 class RunError(TopomatchError):
     """A run that finished with failed items; the results of the others were written."""
+
+    kind = "run"

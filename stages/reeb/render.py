@@ -79,7 +79,8 @@ def draw_scene(ax, V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = 
     B = view_basis(elev, azim)
     S = np.asarray(V, float) @ B.T  # screen x, screen y, depth (larger: nearer)
     extent = float(np.ptp(S[:, :2], axis=0).max()) or 1.0
-    polys, colors, depth = [S[F][:, :, :2]], [], [S[F][:, :, 2].mean(axis=1)]
+    SF = S[F]  # (m, 3, 3) the faces' corners on the screen
+    polys, colors, depth = [SF[:, :, :2]], [], [SF[:, :, 2].mean(axis=1)]
     rgb = face_colors(V, F, values=values, cmap=cmap)
     if faded is not None:
         rgb = np.where(np.asarray(faded, bool)[:, None], 0.55 + 0.4 * rgb.mean(axis=1, keepdims=True), rgb)

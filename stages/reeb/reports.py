@@ -106,7 +106,8 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
             ax.set_title(f"{label}\nfailed", fontsize=7, color="#b00")
             continue
         caption = draw_item(ax, r, params)
-        kind = r.final("function").kind if r.final("function") is not None else ""
+        function = r.final("function")
+        kind = function.kind if function is not None else ""
         functions.add(kind)
         ax.set_title(f"{label} ({FUNCTION_NAMES.get(kind, kind)}) {sweep}\n{caption}", fontsize=7)
     bottom = keys_height / (params.panel_size * rows + keys_height)
@@ -149,9 +150,8 @@ def reeb_steps_report(experiment, results, params: ReebStepsParams) -> ReportOut
     the rest grey, and the graph of their components; a table of nodes, edges and cycles per step."""
     import matplotlib.pyplot as plt
 
-    import networkx as nx
-
     from topomatch.stages.mesh.render import UP_ORDER
+    from topomatch.stages.reeb.prune import cycle_rank
     from topomatch.stages.reeb.render import draw_scene
 
     chosen = [r for r in results if r.ok and r.final("reeb") is not None and r.final("level_sets") is not None
@@ -164,23 +164,22 @@ def reeb_steps_report(experiment, results, params: ReebStepsParams) -> ReportOut
         mesh, ls, reeb = r.final("mesh"), r.final("level_sets"), r.final("reeb")
         function = r.final("function")
         n = ls.n_levels
-        band = np.asarray(ls.vertex_band)
+        face_band = np.asarray(ls.vertex_band)[mesh.F].min(axis=1)
+        V = mesh.V[:, order]
+        graph = reeb.graph.copy()  # positions in the drawing's axis order, once per item
+        for v in graph.nodes:
+            graph.nodes[v]["pos"] = np.asarray(graph.nodes[v]["pos"], float)[order]
         for j, k in enumerate(params.steps):
             k = min(k, n)
-            keep = [v for v, d in reeb.graph.nodes(data=True) if v == "root" or d["band"] < k]
-            sub = reeb.graph.subgraph(keep).copy()
-            for v in sub.nodes:
-                sub.nodes[v]["pos"] = np.asarray(sub.nodes[v]["pos"], float)[order]
-            body = sub.subgraph([v for v in sub if v != "root"])  # cycles of the surface, as reeb.cycle_rank
-            cycles = body.number_of_edges() - body.number_of_nodes() + nx.number_connected_components(body) \
-                if len(body) else 0
+            sub = graph.subgraph([v for v, d in graph.nodes(data=True) if v == "root" or d["band"] < k])
+            cycles = cycle_rank(sub)  # cycles of the surface, the root left out
             rows.append({"item": r.item_id, "bands": k, "of": n, "nodes": sub.number_of_nodes(),
                          "edges": sub.number_of_edges(), "cycles": cycles})
             ax = fig.add_subplot(max(len(chosen), 1), cols, i * cols + j + 1)
             iso = ls.curves.segments[ls.curves.level < k][:, :, order]
-            draw_scene(ax, mesh.V[:, order], mesh.F, values=None if function is None else function.values,
+            draw_scene(ax, V, mesh.F, values=None if function is None else function.values,
                        isolines=iso, graph=sub, endpoints=(), elev=params.elev, azim=params.azim, alpha=0.5,
-                       faded=band[mesh.F].min(axis=1) >= k)
+                       faded=face_band >= k)
             ax.set_title(f"{Path(r.input_path).name.split('.')[0]}: {k} of {n} bands\n{sub.number_of_nodes()} nodes, "
                          f"{cycles} cycle{'s' * (cycles != 1)}", fontsize=7)
     fig.suptitle("Reeb graph extraction step by step: bands swept so far in colour, their components as nodes",
@@ -346,7 +345,7 @@ def export_report(experiment, results, params: ExportParams) -> ReportOutput:
             rows.append({"item": r.item_id, "what": f"mesh ({which})", "file": path,
                          "vertices": mesh.n_vertices, "faces": mesh.n_faces, "edges": ""})
         for kind in params.graphs:
-            value = r.final("skeleton") if kind == "skeleton" else r.final("reeb")
+            value = r.final(kind)
             if value is None:
                 continue
             for fmt in params.graph_formats:
@@ -442,7 +441,8 @@ def skeleton_3d_report(experiment, results, params: Skeleton3DParams) -> ReportO
     rows = -(-len(chosen) // cols)
     titles = []
     for r in chosen:
-        kind = r.final("function").kind if r.final("function") is not None else ""
+        function = r.final("function")
+        kind = function.kind if function is not None else ""
         sweep = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in r.sweep.items() if k not in params.where)
         titles.append(f"{Path(r.input_path).name.split('.')[0]} {sweep}".strip() + (f" ({kind})" if kind else ""))
     fig = make_subplots(rows=rows, cols=cols, specs=[[{"type": "scene"}] * cols for _ in range(rows)],

@@ -21,7 +21,7 @@ import sys
 
 from topomatch import __version__
 from topomatch.cli import common, engine, registration, retrieval, skeleton, thesis
-from topomatch.pipeline.errors import ConfigError, InputError, RunError, StageError, TopomatchError
+from topomatch.pipeline.errors import TopomatchError
 
 #: The command modules, in --help order; each has ``add_parsers(subparsers)``.
 COMMANDS = (engine, skeleton, retrieval, registration, thesis)
@@ -80,13 +80,6 @@ def _command_name(argv: list[str]) -> str:
     return ""
 
 
-def _kind(exc: BaseException) -> str:
-    for cls, kind in ((ConfigError, "config"), (InputError, "input"), (StageError, "stage"), (RunError, "run")):
-        if isinstance(exc, cls):
-            return kind
-    return "error"
-
-
 def _fail(args: argparse.Namespace, message: str, status: int, kind: str, exc: BaseException | None) -> int:
     """Report an error: one line on stderr, and with ``--json`` the error object on stdout (unless the
     command already printed its result object, which then tells what went wrong)."""
@@ -110,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     except TopomatchError as exc:
         if args.debug:
             raise
-        return _fail(args, str(exc), exc.exit_code, _kind(exc), exc)
+        return _fail(args, str(exc), exc.exit_code, exc.kind, exc)
     except OSError as exc:  # a file that cannot be written or read where the command put it (--out, --db, ...)
         if args.debug:
             raise

@@ -11,7 +11,6 @@ import re
 import networkx as nx
 import numpy as np
 import pytest
-from pathlib import Path
 
 from topomatch.pipeline.config import build_experiment
 from topomatch.pipeline.runner import run_experiment
