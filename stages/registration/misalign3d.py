@@ -31,14 +31,19 @@ def resample_volume(moving: Volume, transform: RigidTransform3D, reference: Volu
     ``fill`` where T(p) falls outside the moving grid."""
     n = reference.data.size
     out = np.empty(n)
-    inv = np.linalg.inv(moving.index_matrix)
     for start in range(0, n, chunk):
         flat = np.arange(start, min(n, start + chunk))
-        q = transform.apply(reference.voxel_points(flat))
-        idx = ((q - np.asarray(moving.origin)) @ inv.T).T
-        v, inside = trilinear(moving.data, idx)
-        out[flat] = np.where(inside, v, fill)
+        out[flat] = resample_at(moving, transform, reference, flat, fill=fill)
     return out.reshape(reference.shape)
+
+
+def resample_at(moving: Volume, transform: RigidTransform3D, reference: Volume, flat: np.ndarray, *,
+                fill: float = 0.0) -> np.ndarray:
+    """``moving(T(p))`` (trilinear) at the voxels p of ``reference`` with flat indices ``flat`` (m,)."""
+    q = transform.apply(reference.voxel_points(flat))
+    idx = ((q - np.asarray(moving.origin)) @ np.linalg.inv(moving.index_matrix).T).T
+    v, inside = trilinear(moving.data, idx)
+    return np.where(inside, v, fill)
 
 
 def t2_like(data: np.ndarray) -> np.ndarray:

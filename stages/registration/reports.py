@@ -353,16 +353,22 @@ def volume_overlay_figure(fixed, moving, registration, title: str = ""):
     identity transform) and after the registration: a figure of two columns."""
     import matplotlib.pyplot as plt
 
-    before, after = before_after(fixed, moving, registration.transform)
+    from topomatch.stages.registration.misalign3d import resample_at
+    from topomatch.stages.registration.transform3d import RigidTransform3D
+
     nk, nj, ni = fixed.shape
     sx, sy, sz = fixed.spacing
-    views = [("slice k (axial)", lambda a: a[nk // 2], sy / sx), ("slice j (coronal)", lambda a: a[:, nj // 2], sz / sx),
-             ("slice i (sagittal)", lambda a: a[:, :, ni // 2], sz / sy)]
+    grid = np.arange(fixed.data.size).reshape(fixed.shape)
+    views = [("slice k (axial)", grid[nk // 2], sy / sx), ("slice j (coronal)", grid[:, nj // 2], sz / sx),
+             ("slice i (sagittal)", grid[:, :, ni // 2], sz / sy)]
+    fill = float(moving.data.min())
+    identity = RigidTransform3D(center=tuple(fixed.center))
     fig, axes = plt.subplots(3, 2, figsize=(8, 11))
-    for row, (label, take, aspect) in enumerate(views):
-        for col, (moved, when) in enumerate(((before, "before"), (after, "after"))):
+    for row, (label, plane, aspect) in enumerate(views):  # only the three planes shown are resampled
+        for col, (transform, when) in enumerate(((identity, "before"), (registration.transform, "after"))):
+            moved = resample_at(moving, transform, fixed, plane.ravel(), fill=fill).reshape(plane.shape)
             ax = axes[row, col]
-            ax.imshow(checkerboard(take(fixed.data), take(moved)), cmap="gray", interpolation="nearest",
+            ax.imshow(checkerboard(fixed.data.ravel()[plane], moved), cmap="gray", interpolation="nearest",
                       aspect=aspect, origin="lower" if row else "upper")
             ax.set_title(f"{label}, {when}", fontsize=8)
             ax.set_axis_off()
