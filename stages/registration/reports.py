@@ -348,8 +348,8 @@ def overlay_figure(fixed, moving, registration, title: str = ""):
 
 
 def volume_overlay_figure(fixed, moving, registration, title: str = ""):
-    """Three orthogonal slices through the fixed volume's centre (rows: axial, coronal, sagittal in array
-    order k, j, i), each as a checkerboard of fixed and moving before (the files' own placement,
+    """Three orthogonal slices through the fixed volume's centre (rows: array axes k, j, i; which one is
+    axial depends on the acquisition, so they are named by axis), each as a checkerboard of fixed and moving before (the files' own placement,
     identity transform) and after the registration: a figure of two columns."""
     import matplotlib.pyplot as plt
 
@@ -359,8 +359,8 @@ def volume_overlay_figure(fixed, moving, registration, title: str = ""):
     nk, nj, ni = fixed.shape
     sx, sy, sz = fixed.spacing
     grid = np.arange(fixed.data.size).reshape(fixed.shape)
-    views = [("slice k (axial)", grid[nk // 2], sy / sx), ("slice j (coronal)", grid[:, nj // 2], sz / sx),
-             ("slice i (sagittal)", grid[:, :, ni // 2], sz / sy)]
+    views = [("slice k (array axis 0)", grid[nk // 2], sy / sx), ("slice j (array axis 1)", grid[:, nj // 2], sz / sx),
+             ("slice i (array axis 2)", grid[:, :, ni // 2], sz / sy)]
     fill = float(moving.data.min())
     identity = RigidTransform3D(center=tuple(fixed.center))
     fig, axes = plt.subplots(3, 2, figsize=(8, 11))
