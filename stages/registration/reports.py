@@ -349,8 +349,9 @@ def overlay_figure(fixed, moving, registration, title: str = ""):
 
 def volume_overlay_figure(fixed, moving, registration, title: str = ""):
     """Three orthogonal slices through the fixed volume's centre (rows: array axes k, j, i; which one is
-    axial depends on the acquisition, so they are named by axis), each as a checkerboard of fixed and moving before (the files' own placement,
-    identity transform) and after the registration: a figure of two columns."""
+    axial depends on the acquisition, so they are named by axis), each as a checkerboard of fixed and
+    moving before (the files' own placement, identity transform) and after the registration: a figure
+    of two columns."""
     import matplotlib.pyplot as plt
 
     from topomatch.stages.registration.misalign3d import resample_at
