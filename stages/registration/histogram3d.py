@@ -27,6 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from topomatch.stages.registration.histogram import Binning
+from topomatch.stages.registration.histogram3d_kernel import joint_histogram
 from topomatch.stages.registration.transform3d import euler_matrix
 from topomatch.stages.registration.volume import Volume
 
@@ -110,7 +111,7 @@ class VolumeHistogram:
         self.n_samples = idx.shape[1]
         self._P = np.ascontiguousarray((fixed.physical(idx.T) - self.center).T)  # (3, n) sample positions, about c
         self.fixed_bins = fixed_binning.index(values)
-        self._fbk = self.fixed_bins * moving_binning.bins
+        self._fbk = np.ascontiguousarray(self.fixed_bins * moving_binning.bins, dtype=np.int64)
         self.moving = moving
         self._inv = np.linalg.inv(moving.index_matrix)
         self._origin = np.asarray(moving.origin)
@@ -138,7 +139,22 @@ class VolumeHistogram:
         return float(np.mean(((U >= 0) & (U <= self._hi)).all(axis=0)))
 
     def __call__(self, theta) -> tuple[np.ndarray, int]:
-        """Joint histogram (fixed bins, moving bins) for ``theta`` and the number of samples inside."""
+        """Joint histogram (fixed bins, moving bins) for ``theta`` and the number of samples inside.
+
+        One compiled pass (:mod:`~topomatch.stages.registration.histogram3d_kernel`) when numba is
+        installed, else :meth:`histogram_numpy` (the same arithmetic)."""
+        if joint_histogram is None:
+            return self.histogram_numpy(theta)
+        th = np.asarray(theta, dtype=np.float64)
+        A = self._inv @ euler_matrix(th[0], th[1], th[2])
+        b = self._inv @ (self.center + th[3:6] - self._origin)
+        mk, mj, mi = self._mshape
+        h0, h1, n_inside = joint_histogram(A, b, self._P, self._mflat, mi, mj, mk, self._fbk, self._bmax, self.n_cells)
+        K = self.n_cells
+        return (h0[:K] + h1[:K]).reshape(self.shape), int(n_inside)
+
+    def histogram_numpy(self, theta) -> tuple[np.ndarray, int]:
+        """:meth:`__call__` in numpy: the reference of the compiled kernel, and its fallback."""
         U = self.positions(theta)
         C = np.minimum(np.maximum(U, 0.0), self._hi)
         inside = (C == U).all(axis=0)

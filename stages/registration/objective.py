@@ -43,20 +43,24 @@ class Objective:
     tmi_form : {'additive', 'relative'}
     min_overlap : float
         Smallest accepted fraction of fixed samples inside the moving image.
+    overlap_power : float
+        The measure is multiplied by (fraction of fixed samples inside) ** ``overlap_power`` (0: not):
+        samples that leave the moving image count as carrying no information, so a sliver of overlap
+        whose few samples happen to agree cannot outscore a wide one (3D coarse levels).
     """
 
     def __init__(self, histogram: JointHistogram, metric: Metric = "jt", *, alpha: float = 2.0,
                  weights: Weights = "histogram", tmi_form: Literal["additive", "relative"] = "additive",
-                 min_overlap: float = 0.25):
+                 min_overlap: float = 0.25, overlap_power: float = 0.0):
         self.histogram = histogram
         self.metric, self.alpha, self.weights, self.tmi_form = metric, float(alpha), weights, tmi_form
-        self.min_overlap = float(min_overlap)
+        self.min_overlap, self.overlap_power = float(min_overlap), float(overlap_power)
         self.n_evals = 0
 
     def with_min_overlap(self, min_overlap: float) -> "Objective":
         """The same measure on the same histogram with another overlap bound."""
         return Objective(self.histogram, self.metric, alpha=self.alpha, weights=self.weights, tmi_form=self.tmi_form,
-                         min_overlap=min_overlap)
+                         min_overlap=min_overlap, overlap_power=self.overlap_power)
 
     @property
     def factor(self) -> int:
@@ -72,6 +76,8 @@ class Objective:
         if n_inside < self.min_overlap * self.histogram.n_samples or n_inside == 0:
             return -math.inf
         value = similarity(h, self.metric, alpha=self.alpha, weights=self.weights, tmi_form=self.tmi_form)
+        if self.overlap_power:
+            value *= (n_inside / self.histogram.n_samples) ** self.overlap_power
         return value if math.isfinite(value) else -math.inf
 
 

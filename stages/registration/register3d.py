@@ -15,8 +15,12 @@ Tsallis MI; :mod:`~topomatch.stages.registration.divergence`) of the joint histo
    samples ``samples`` fixed voxels; the optimiser (the modified SPSA of
    :mod:`~topomatch.stages.registration.spsa`, or Powell) starts from the previous level's result.
    Step and perturbation lengths are millimetres. A coarse level with fewer than
-   :data:`MIN_LEVEL_SAMPLES` samples (a small field of view) runs its iterations on the first level
-   that has enough instead.
+   :data:`MIN_LEVEL_SAMPLES` samples (a small field of view) is measured on the grid of the first
+   level that has enough, Gaussian-smoothed to its own resolution instead. Every level but the finest
+   multiplies its measure by the overlap fraction (``coarse_overlap_power``), so that a sliver of
+   overlap whose few samples happen to agree cannot outscore the aligned position. A level with ``settle > 0`` (the finest, by default) runs again from its
+   end, at most ``reruns`` times, while the last half of its iterations still moved the estimate by
+   more than ``settle`` mm (its decaying steps ran out before it converged).
 3. **Parameter scaling**: angles are optimised in units of ``1 / r`` radians, r the RMS distance of
    the fixed foreground from the centre, so that one unit of any parameter moves the volume by
    about 1 mm.
@@ -64,6 +68,10 @@ class Level3DSpec(Params):
     average: int = Field(1, ge=1, description="SPSA gradient estimates averaged per iteration")
     gain_alpha: float = Field(0.602, gt=0, le=1, allow_inf_nan=False, description="decay exponent of a_k")
     samples: int | None = Field(None, ge=100, description="at most this many fixed voxels (fixed-seed random subset)")
+    settle: float = Field(0.0, ge=0, allow_inf_nan=False,
+                          description="run the level again from its end while the last half of its iterations moved "
+                                      "the estimate by more than this (mm, RMS displacement; 0: never)")
+    reruns: int = Field(0, ge=0, le=10, description="at most this many runs again (see settle)")
 
 
 def default_schedule_3d() -> list[Level3DSpec]:
@@ -71,7 +79,8 @@ def default_schedule_3d() -> list[Level3DSpec]:
     return [
         Level3DSpec(spacing=8.0, bins=16, iterations=150, step=4.0, c=4.0, samples=4000),
         Level3DSpec(spacing=4.0, bins=24, iterations=60, step=1.0, c=2.0, samples=8000),
-        Level3DSpec(spacing=2.0, bins=64, iterations=40, step=0.3, c=1.0, average=2, gain_alpha=1.0, samples=40000),
+        Level3DSpec(spacing=2.0, bins=64, iterations=40, step=0.3, c=1.0, average=2, gain_alpha=1.0, samples=100000,
+                    settle=0.2, reruns=2),
     ]
 
 
@@ -130,6 +139,10 @@ class Register3DParams(Params):
         "foreground", description="fixed voxels sampled: all, or the Otsu foreground (a mask given to the API wins)")
     jitter: bool = Field(True, description="move each sample by a fixed random offset within its voxel")
     seed: int = Field(0, ge=0, description="seed of the SPSA perturbations and of the voxel samples")
+    coarse_overlap_power: float = Field(1.0, ge=0, le=4, allow_inf_nan=False,
+                                        description="every level but the finest multiplies its measure by the "
+                                                    "overlap fraction to this power (0: not): a sliver of overlap "
+                                                    "cannot outscore the aligned position")
 
     def method(self) -> str:
         return f"{self.optimizer.name}/{self.metric.label()}/3d"
@@ -260,8 +273,12 @@ MIN_LEVEL_VOXELS = 8
 """Smallest number of voxels along every axis of a pyramid level; a coarser level uses less shrinking."""
 
 MIN_LEVEL_SAMPLES = 2000
-"""Fewest fixed samples of a pyramid level's measure; a coarser level with fewer uses the first finer level with
-enough (its schedule entry is kept)."""
+"""Fewest fixed samples of a pyramid level's measure; a coarser level with fewer is measured on the grid of the
+first finer level with enough, smoothed (its schedule entry is kept)."""
+
+SMALL_FOV_SIGMA = 0.3
+"""Gaussian sigma, as a fraction of the level's spacing, that stands in for a coarse level's block average on a
+finer grid (a block of width s has a standard deviation of s / sqrt(12) = 0.29 s)."""
 
 
 class _Run3D:
@@ -280,25 +297,8 @@ class _Run3D:
                 raise StageError("the fixed mask selects no voxel")
         elif params.sample_mask == "foreground":
             fixed_mask = foreground_mask(fixed)
-        m = params.metric
         mask_volume = None if fixed_mask is None else fixed.with_data(fixed_mask.astype(np.float64))
-        self.levels: list[_Level] = []
-        for i, spec in enumerate(params.schedule):
-            F, M = _level_volume(fixed, spec.spacing), _level_volume(moving, spec.spacing)
-            mask = None if mask_volume is None else _level_volume(mask_volume, spec.spacing).data >= 0.5
-            if mask is not None and not mask.any():
-                mask = None
-            jh = VolumeHistogram(F, M, Binning.of(fixed.data, spec.bins), Binning.of(moving.data, spec.bins),
-                                 center=self.center, samples=spec.samples, mask=mask, jitter=params.jitter,
-                                 seed=params.seed + i)
-            obj = Objective(jh, m.name, alpha=m.alpha, weights=m.weights, tmi_form=m.tmi_form, min_overlap=m.min_overlap)
-            self.levels.append(_Level(spec, obj, float(np.mean(F.spacing))))
-        # a level with too few samples (a small field of view shrunk a lot) has a measure dominated by chance and
-        # by the overlap: its iterations run on the first level with enough samples instead
-        enough = next((lv for lv in self.levels if lv.objective.histogram.n_samples >= MIN_LEVEL_SAMPLES),
-                      self.levels[-1])
-        self.levels = [lv if lv.objective.histogram.n_samples >= MIN_LEVEL_SAMPLES or lv is enough
-                       else _Level(lv.spec, enough.objective, enough.spacing) for lv in self.levels]
+        self.levels = self._pyramid(mask_volume)
         self.radius = rms_radius_3d(fixed, fixed_mask if fixed_mask is not None else foreground_mask(fixed))
         self.scales = np.array([1.0 / self.radius] * 3 + [1.0] * 3)
         self.rng = np.random.default_rng(params.seed)
@@ -312,6 +312,37 @@ class _Run3D:
         self.upper = np.r_[a, a, a, t_init + self.max_translation]
         self.history: list[dict[str, np.ndarray]] = []
         self.better: np.ndarray | None = None
+
+    def _pyramid(self, mask_volume: Volume | None) -> list[_Level]:
+        """One measure per schedule level, coarse to fine.
+
+        A level whose grid would hold fewer than :data:`MIN_LEVEL_SAMPLES` samples (a small field of view
+        shrunk a lot: its measure would be dominated by chance and by the overlap) is measured instead on the
+        grid of the first level with enough, after a Gaussian of sigma = :data:`SMALL_FOV_SIGMA` x its spacing
+        (about the low-pass of its block average, without losing samples). Every level but the finest
+        weighs its measure by the overlap (``coarse_overlap_power``)."""
+        p, m = self.params, self.params.metric
+        fixed, moving = self.fixed, self.moving
+
+        def build(i: int, spec: Level3DSpec, grid: Level3DSpec, sigma: float) -> _Level:
+            F, M = (fixed.smoothed(sigma), moving.smoothed(sigma)) if sigma > 0 else (fixed, moving)
+            F, M = _level_volume(F, grid.spacing), _level_volume(M, grid.spacing)
+            mask = None if mask_volume is None else _level_volume(mask_volume, grid.spacing).data >= 0.5
+            if mask is not None and not mask.any():
+                mask = None
+            jh = VolumeHistogram(F, M, Binning.of(fixed.data, spec.bins), Binning.of(moving.data, spec.bins),
+                                 center=self.center, samples=grid.samples, mask=mask, jitter=p.jitter, seed=p.seed + i)
+            power = p.coarse_overlap_power if i < len(p.schedule) - 1 else 0.0
+            obj = Objective(jh, m.name, alpha=m.alpha, weights=m.weights, tmi_form=m.tmi_form,
+                            min_overlap=m.min_overlap, overlap_power=power)
+            return _Level(spec, obj, float(np.mean(F.spacing)))
+
+        levels = [build(i, spec, spec, 0.0) for i, spec in enumerate(p.schedule)]
+        enough = next((i for i, lv in enumerate(levels) if lv.objective.histogram.n_samples >= MIN_LEVEL_SAMPLES),
+                      len(levels) - 1)
+        for i in range(enough):
+            levels[i] = build(i, p.schedule[i], p.schedule[enough], SMALL_FOV_SIGMA * p.schedule[i].spacing)
+        return levels
 
     def start_search(self, t_init: np.ndarray) -> np.ndarray:
         """The starting parameters. With ``start.steps > 0``: a grid of ``(2 steps + 1)^3`` shifts of
@@ -382,12 +413,23 @@ class _Run3D:
         stop = ""
         for li, level in enumerate(self.levels):
             cb = None if self.callback is None else (lambda k, th, v, li=li: self.callback(li, k, th, v))
-            res = self.optimize(li, level.spec, theta, lower=self.lower, upper=self.upper, callback=cb)
-            if level.objective(res.theta) >= level.objective(theta):  # a level never ends worse than it started
-                theta = res.theta
-            stop = res.stop_reason
-            self.history.append({"level": np.full(res.iterations, li), **res.history})
+            for _ in range(1 + level.spec.reruns):
+                res = self.optimize(li, level.spec, theta, lower=self.lower, upper=self.upper, callback=cb)
+                if level.objective(res.theta) >= level.objective(theta):  # a level never ends worse than it started
+                    theta = res.theta
+                stop = res.stop_reason
+                self.history.append({"level": np.full(res.iterations, li), **res.history})
+                if not self.still_moving(res.history["theta"], level.spec.settle):
+                    break
         return np.asarray(theta, dtype=np.float64), stop
+
+    def still_moving(self, path: np.ndarray, settle: float) -> bool:
+        """Whether the last half of an optimiser's iterates ``path`` (k, 6) moved the estimate by more than
+        ``settle`` mm: the level's step lengths ran out before it converged (a coarser level left the estimate
+        further away than the level's steps can travel: a small field of view with few coarse samples)."""
+        if settle <= 0 or len(path) < 4:
+            return False
+        return self.distance(path[-1], path[len(path) // 2]) > settle
 
     def distance(self, a: np.ndarray, b: np.ndarray) -> float:
         """Approximate RMS displacement (mm) between two parameter vectors."""
@@ -443,8 +485,10 @@ class _Run3D:
                 if check.refine > 0:
                     res = self.optimize(0, spec, probe, lower=self.lower, upper=self.upper)
                     probe, v = res.theta, coarse(res.theta)
-                if (math.isfinite(v) and v > here + check.margin * abs(here)
-                        and self.distance(probe, theta) > 2.0 * self.levels[0].spacing):
+                # a result the coarsest level cannot score (its overlap there is below min_overlap) loses to any
+                # probe it can score: -inf + margin * inf would be nan, and a comparison with nan never flags
+                beats = v > here + check.margin * abs(here) if math.isfinite(here) else True
+                if math.isfinite(v) and beats and self.distance(probe, theta) > 2.0 * self.levels[0].spacing:
                     self.better = probe
                     problems.append(f"a coarse search finds a higher value ({v:.4g} > {here:.4g} at "
                                     f"{self.levels[0].spacing:.0f} mm) {self.distance(probe, theta):.0f} mm away "
