@@ -24,6 +24,8 @@ left out and counted.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from topomatch.stages.registration.histogram import Binning
@@ -122,6 +124,13 @@ class VolumeHistogram:
         self._mshape = moving.shape
         self._mflat = np.ascontiguousarray((moving.data.ravel() - moving_binning.lo) * moving_binning.scale - 0.5)
         self._bmax = moving_binning.bins - 1
+
+    def shuffled(self, seed: int = 0) -> "VolumeHistogram":
+        """The same samples with their fixed intensities paired with other samples' (a fixed-seed permutation):
+        the histograms of two volumes that share no structure, with these marginals and this sample count."""
+        other = copy.copy(self)
+        other._fbk = np.random.default_rng(seed).permutation(self._fbk)
+        return other
 
     def positions(self, theta) -> np.ndarray:
         """Continuous moving indices (3, n) in (i, j, k) order of the samples under ``theta``."""

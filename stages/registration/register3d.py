@@ -115,6 +115,9 @@ class Check3DSpec(Params):
     refine: int = Field(30, ge=0, description="coarsest-level iterations from the best probes")
     candidates: int = Field(2, ge=1, description="best probes refined")
     margin: float = Field(0.01, ge=0, description="relative margin by which a probe must win to flag the result")
+    chance: float = Field(3.0, ge=0, description="flag a result whose measure is below this multiple of its chance "
+                                                 "level (the same samples with the fixed intensities paired at random; "
+                                                 "0: no test)")
     retry: bool = Field(True, description="when a probe wins, run the schedule once more from it and keep the "
                                           "higher end")
     on_failure: Literal["flag", "error"] = Field("flag", description="flag a failed registration, or raise an error")
@@ -471,6 +474,14 @@ class _Run3D:
             names = [n for n, b in zip(("angle_x", "angle_y", "angle_z", "tx", "ty", "tz"), at_bound) if b]
             problems.append(f"the estimate is on the search bound of {', '.join(names)} (bounds.max_translation / "
                             f"max_angle): the misalignment is probably outside the capture range")
+        if check.chance > 0:
+            h = fine.histogram.shuffled(self.params.seed)
+            chance = Objective(h, fine.metric, alpha=fine.alpha, weights=fine.weights, tmi_form=fine.tmi_form,
+                               min_overlap=fine.min_overlap)(theta)
+            if math.isfinite(chance) and chance > 0 and value < check.chance * chance:
+                problems.append(f"the measure at the result ({value:.3g}) is only {value / chance:.2f} times its chance "
+                                f"level ({chance:.3g}: the same samples paired at random): the volumes share no "
+                                f"structure that this measure can align")
         start_fine = fine(self.start)
         if self.distance(theta, self.start) > 0.5 * self.levels[-1].spacing and math.isfinite(start_fine) \
                 and not value > start_fine:
