@@ -132,12 +132,16 @@ class VolumeHistogram:
         other._fbk = np.random.default_rng(seed).permutation(self._fbk)
         return other
 
+    def _index_map(self, theta) -> tuple[np.ndarray, np.ndarray]:
+        """``A`` (3, 3) and ``b`` (3,) with moving continuous index ``A p + b`` of a sample at ``p`` (about c)."""
+        th = np.asarray(theta, dtype=np.float64)
+        A = self._inv @ euler_matrix(th[0], th[1], th[2])
+        b = self._inv @ (self.center + th[3:6] - self._origin)
+        return A, b
+
     def positions(self, theta) -> np.ndarray:
         """Continuous moving indices (3, n) in (i, j, k) order of the samples under ``theta``."""
-        th = np.asarray(theta, dtype=np.float64)
-        R = euler_matrix(th[0], th[1], th[2])
-        A = self._inv @ R
-        b = self._inv @ (self.center + th[3:6] - self._origin)
+        A, b = self._index_map(theta)
         U = A @ self._P
         U += b[:, None]
         return U
@@ -154,9 +158,7 @@ class VolumeHistogram:
         installed, else :meth:`histogram_numpy` (the same arithmetic)."""
         if joint_histogram is None:
             return self.histogram_numpy(theta)
-        th = np.asarray(theta, dtype=np.float64)
-        A = self._inv @ euler_matrix(th[0], th[1], th[2])
-        b = self._inv @ (self.center + th[3:6] - self._origin)
+        A, b = self._index_map(theta)
         mk, mj, mi = self._mshape
         h0, h1, n_inside = joint_histogram(A, b, self._P, self._mflat, mi, mj, mk, self._fbk, self._bmax, self.n_cells)
         K = self.n_cells

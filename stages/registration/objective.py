@@ -59,8 +59,13 @@ class Objective:
 
     def with_min_overlap(self, min_overlap: float) -> "Objective":
         """The same measure on the same histogram with another overlap bound."""
-        return Objective(self.histogram, self.metric, alpha=self.alpha, weights=self.weights, tmi_form=self.tmi_form,
-                         min_overlap=min_overlap, overlap_power=self.overlap_power)
+        return self.on(self.histogram, min_overlap=min_overlap)
+
+    def on(self, histogram, *, min_overlap: float | None = None) -> "Objective":
+        """The same measure (and overlap settings, unless ``min_overlap`` is given) on another histogram."""
+        return Objective(histogram, self.metric, alpha=self.alpha, weights=self.weights, tmi_form=self.tmi_form,
+                         min_overlap=self.min_overlap if min_overlap is None else min_overlap,
+                         overlap_power=self.overlap_power)
 
     @property
     def factor(self) -> int:

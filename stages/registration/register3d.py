@@ -18,17 +18,19 @@ Tsallis MI; :mod:`~topomatch.stages.registration.divergence`) of the joint histo
    :data:`MIN_LEVEL_SAMPLES` samples (a small field of view) is measured on the grid of the first
    level that has enough, Gaussian-smoothed to its own resolution instead. Every level but the finest
    multiplies its measure by the overlap fraction (``coarse_overlap_power``), so that a sliver of
-   overlap whose few samples happen to agree cannot outscore the aligned position. A level with ``settle > 0`` (the finest, by default) runs again from its
-   end, at most ``reruns`` times, while the last half of its iterations still moved the estimate by
-   more than ``settle`` mm (its decaying steps ran out before it converged).
+   overlap whose few samples happen to agree cannot outscore the aligned position. A level with
+   ``settle > 0`` (the finest, by default) runs again from its end, at most ``reruns`` times, while
+   the last half of its iterations still moved the estimate by more than ``settle`` mm (its decaying
+   steps ran out before it converged).
 3. **Parameter scaling**: angles are optimised in units of ``1 / r`` radians, r the RMS distance of
    the fixed foreground from the centre, so that one unit of any parameter moves the volume by
    about 1 mm.
 4. **Self-check** (a failure is a flag with a reason, never a silent wrong answer): the result is
    flagged when the objective could not be evaluated at the start (no overlap after
    initialisation), when less than ``metric.min_overlap`` of the fixed samples overlap the moving
-   volume at the result, when it sits on a search bound, when the measure at the result is not
-   better than at the start, or when a coarse search (rotations about each axis and shifts along
+   volume at the result, when it sits on a search bound, when the measure at the result is below
+   ``check.chance`` times its chance level (the same samples with the fixed intensities paired at
+   random: unrelated content), when it is not better than at the start, or when a coarse search (rotations about each axis and shifts along
    each, refined briefly) finds a higher coarsest-level value elsewhere; with ``check.retry`` the
    schedule then runs once more from there, and the higher of the two ends is checked again.
 """
@@ -475,9 +477,7 @@ class _Run3D:
             problems.append(f"the estimate is on the search bound of {', '.join(names)} (bounds.max_translation / "
                             f"max_angle): the misalignment is probably outside the capture range")
         if check.chance > 0:
-            h = fine.histogram.shuffled(self.params.seed)
-            chance = Objective(h, fine.metric, alpha=fine.alpha, weights=fine.weights, tmi_form=fine.tmi_form,
-                               min_overlap=fine.min_overlap)(theta)
+            chance = fine.on(fine.histogram.shuffled(self.params.seed))(theta)
             if math.isfinite(chance) and chance > 0 and value < check.chance * chance:
                 problems.append(f"the measure at the result ({value:.3g}) is only {value / chance:.2f} times its chance "
                                 f"level ({chance:.3g}: the same samples paired at random): the volumes share no "
