@@ -19,7 +19,8 @@ public API (:meth:`topomatch.retrieval.Collection.part_matrices`). Collections:
   no class information); **hidden-like**, half of the shapes permuted in D2 and SH and a quarter
   in AGD.
 
-The grid: order weights (equal ... the two smallest), screening (none, 0.5, 0.6, 0.65, 0.7),
+When the two selections differ, the default is the one of their two settings with the better criterion
+pooled over both sides' tune collections. The grid: order weights (equal ... the two smallest), screening (none, 0.5, 0.6, 0.65, 0.7),
 re-ranking k (5, 10, auto = round(sqrt(n) / 2)). The criterion, computed on the tune side only:
 the worst margin over the tune collections of the fusion's mAP over its best part's mAP
 ("never worse than its best part"), then the mean mAP. The chosen settings and every method's
@@ -127,6 +128,12 @@ def main() -> None:
                                    "reported": {n: grid[best][1][n] for n in [reported_on, f"{reported_on} (hidden-like)"]
                                                 + report}}
         print(f"selection {side} (chosen on {', '.join(names)}): {best}")
+    # the default: the setting both selections chose; when they differ, the best criterion pooled over
+    # both sides' tune collections (both Watertight halves and the tune collections)
+    pooled = sorted(set(out["selections"]["A"]["chosen_on"]) | set(out["selections"]["B"]["chosen_on"]))
+    candidates = {out["selections"][side]["setting"] for side in "AB"}
+    out["default_rule"] = max(sorted(candidates), key=lambda g: criterion(grid[g][1], pooled))
+    print(f"default by the rule (agreement, else pooled over both tune sides): {out['default_rule']}")
     shown = ["Watertight half A", "Watertight half B", "Watertight half A (hidden-like)",
              "Watertight half B (hidden-like)"] + report
     methods = {p: {n: nn_map(colls[n][0][p], colls[n][1]) for n in shown} for p in base.parts}

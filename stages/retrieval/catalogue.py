@@ -12,14 +12,15 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
 - ``rgpd``, ``srg``: the thesis's skeletons (ch. 3: mixture distance; ch. 4: Fiedler vector),
   endpoint features (a, dv, dc) matched by the greedy correspondence;
 - ``agd``: intrinsic skeleton (average geodesic distance) with heat-kernel endpoint signatures;
-- ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum;
+- ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum (read from
+  the shared spectrum; ``shapedna-full``: its own eigen-solve on the full mesh, kept for comparison);
 - ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
 - ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (parts that agree with the
   others at chance level dropped, order-weighted, re-ranked by manifold ranking);
   ``topomatch-equal``: the first fusion (equal weights, k = 10), kept for comparison.
 
-The intrinsic methods (agd, hks) work on a copy decimated to 6,000 faces and share its 60
-leading eigenpairs through the stage cache (:data:`SPECTRAL_CHAIN`).
+The intrinsic methods (agd, hks, shapedna) work on a copy decimated to 6,000 faces and share its 60
+leading eigenpairs (:data:`SPECTRAL_CHAIN`; computed once per mesh when indexing).
 """
 
 from __future__ import annotations
@@ -103,17 +104,19 @@ METHODS: dict[str, Method] = {m.name: m for m in (
                                           "endpoint_hks_descriptor"), unmatched_cost=0.5),
     Method("hks", "heat-kernel-signature histograms", "vector", SPECTRAL_CHAIN + ("hks",),
            distance=hks.distance_matrix),
-    Method("shapedna", "ShapeDNA, the normalised Laplace-Beltrami spectrum (Reuter 2006)", "vector",
-           CLEAN_CHAIN + ("shapedna",), distance=shapedna.distance_matrix),
+    Method("shapedna", "ShapeDNA, the normalised Laplace-Beltrami spectrum (Reuter 2006), read from the shared "
+           "spectrum of the 6,000-face copy", "vector", SPECTRAL_CHAIN + ("shapedna_of_spectrum",),
+           distance=shapedna.distance_matrix),
+    Method("shapedna-full", "ShapeDNA with its own eigen-solve on the full mesh (consistent FEM mass; kept for "
+           "comparison)", "vector", CLEAN_CHAIN + ("shapedna",), distance=shapedna.distance_matrix),
     Method("d2", "D2 shape distribution (Osada 2002)", "vector", CLEAN_CHAIN + ("d2",),
            distance=d2.distance_matrix),
     Method("sh", "rotation-invariant spherical harmonics (Kazhdan 2003)", "vector",
            CLEAN_CHAIN + ("spherical_harmonics",), distance=spherical_harmonics.distance_matrix),
     Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: parts screened by their agreement, "
-           "order-weighted (the smallest of a pair's scaled dissimilarities count most), re-ranked by manifold ranking "
+           "order-weighted (a pair's two smallest scaled dissimilarities averaged), re-ranked by manifold ranking "
            "(k from the collection's size)", "fusion",
-           fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.9, order_weights=(1, 1, 0.5, 0.25),
-                         screen=0.65)),
+           fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.9, order_weights=(1, 1), screen=0.5)),
     Method("topomatch-equal", "the first fusion (kept for comparison): agd, hks, shapedna, d2 and sh with equal "
            "weights, manifold ranking with k = 10", "fusion",
            fusion=Fusion(FUSION_PARTS, rerank_k=10, rerank_alpha=0.9)),

@@ -198,3 +198,30 @@ def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
 def shapedna_stage(mesh: Mesh, *, params: ShapeDNAParams) -> DescriptorResult:
     """ShapeDNA (Reuter et al. 2006): normalised leading Laplace-Beltrami eigenvalues."""
     return DescriptorResult(Descriptor("vector", descriptor(mesh, params)))
+
+
+class SpectrumShapeDNAParams(Params):
+    """Parameters of ShapeDNA read from a computed spectrum (:func:`from_spectrum`)."""
+
+    k: int = Field(30, ge=1, le=500, description="number of non-zero eigenvalues kept (the spectrum needs at least k)")
+    normalization: Normalization = Field("area_index", description="as ShapeDNAParams.normalization")
+
+
+def from_spectrum(spectrum, k: int = 30, normalization: Normalization = "area_index") -> np.ndarray:
+    """ShapeDNA (k,) from a :class:`~topomatch.stages.spectral.spectrum.Spectrum` of a connected mesh:
+    its eigenvalues 1..k (index 0 is the zero of the constant vector), normalised like :func:`descriptor`.
+
+    No eigen-solve of its own: the intrinsic retrieval methods already compute this spectrum (on the
+    decimated copy, with the lumped mass), so the fusion gets ShapeDNA for free."""
+    values = np.asarray(spectrum.values, dtype=np.float64)
+    if values.shape[0] < k + 1:
+        raise StageError(f"ShapeDNA of a spectrum needs k + 1 = {k + 1} eigenvalues, the spectrum has "
+                         f"{values.shape[0]}; raise spectrum.k")
+    return normalize(values[1:k + 1], spectrum.area, normalization)
+
+
+@stage("shapedna_of_spectrum", params=SpectrumShapeDNAParams, version=1, consumes=("spectrum",),
+       produces=("descriptor",))
+def shapedna_of_spectrum_stage(spectrum, *, params: SpectrumShapeDNAParams) -> DescriptorResult:
+    """ShapeDNA read from the shared spectrum (no eigen-solve of its own)."""
+    return DescriptorResult(Descriptor("vector", from_spectrum(spectrum, params.k, params.normalization)))
