@@ -18,6 +18,11 @@ estimate: other processes only add time).
   ``clean`` to ``prune`` (load excluded), against the libigl reference path in this process
   (``igl.cotmatrix`` + ``igl.massmatrix(FULL)`` + ``igl.spectra.eigs(-L, M, 2, SM)``), with
   lambda2 of both against scipy's ``eigsh`` in shift-invert mode on the same L, M.
+- ``topomatch skeleton big.ply --function mixture --json`` on large meshes made from the horse
+  (``--large``): its stage seconds from ``clean`` to ``prune`` against one ``igl.cotmatrix`` of the
+  same mesh in this process. Two meshes: the horse midpoint-subdivided twice (1.55 M faces, needs
+  no repair) and the same decimated to 1.3 M faces by fast-simplification (which leaves ~12,000
+  coincident vertices, so ``clean`` merges them and drops ~24,000 degenerate faces).
 """
 
 from __future__ import annotations
@@ -118,10 +123,35 @@ def skeleton_rows(repeat: int, mesh_path: Path) -> dict:
             "endpoints": result["n_endpoints"]}
 
 
+def large_skeleton_rows(repeat: int, mesh_path: Path, folder: Path) -> dict:
+    import igl
+
+    from topomatch.meshes import read_mesh
+    from topomatch.stages.mesh.decimate import simplify_to_target
+
+    horse = read_mesh(mesh_path)
+    V, F = igl.upsample(horse.V, horse.F, number_of_subdivs=2)
+    Vd, Fd, _ = simplify_to_target(V, F, 1_300_000)
+    out = {}
+    for name, (Vm, Fm) in {"subdivided (no repair)": (V, F), "decimated (needs repair)": (Vd, Fd)}.items():
+        path = folder / f"large_{len(Fm)}.ply"
+        igl.write_triangle_mesh(str(path), Vm, Fm)
+        stages, ref, seconds = [], [], {}
+        for _ in range(repeat):
+            _, text = process_seconds(TOPOMATCH + ["skeleton", str(path), "--function", "mixture", "--json", "-q"])
+            seconds = json.loads(text)["seconds"]
+            stages.append(sum(v for k, v in seconds.items() if k != "load"))
+            ref.append(in_process_seconds(lambda: igl.cotmatrix(Vm, Fm)))
+        out[name] = {"faces": int(len(Fm)), "stages clean..prune": summary(stages),
+                     "igl.cotmatrix, in process (reference)": summary(ref), "last run's stages": seconds}
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=5)
     parser.add_argument("--mesh", help="skeleton mesh (default: the horse of the data root)")
+    parser.add_argument("--large", action="store_true", help="also the mixture skeleton of 1.3-1.55 M-face meshes")
     parser.add_argument("--json", help="write the results here")
     args = parser.parse_args()
     rows = {"help": help_rows(args.repeat), "register": register_rows(args.repeat)}
@@ -130,6 +160,11 @@ def main() -> None:
         mesh = Path(os.environ["TOPOMATCH_DATA_ROOT"]) / "meshes" / "classic" / "horse_cyberware.ply"
     if mesh is not None:
         rows["skeleton"] = skeleton_rows(args.repeat, mesh)
+        if args.large:
+            import tempfile
+
+            with tempfile.TemporaryDirectory() as folder:
+                rows["large skeleton"] = large_skeleton_rows(args.repeat, mesh, Path(folder))
     rows["load_average"] = os.getloadavg()[0]
     print(json.dumps(rows, indent=1))
     h, r = rows["help"], rows["register"]
@@ -144,6 +179,10 @@ def main() -> None:
         print(f"skeleton: stages clean..prune {s['  stages clean..prune']['min']:.3f} s, reference "
               f"{s['libigl reference path, in process']['min']:.3f} s: {ratio:.2f}x faster; lambda2 rel. error "
               f"{s['lambda2']['topomatch rel. error']:.1e} (libigl's {s['lambda2']['libigl rel. error']:.1e})")
+    for name, r in rows.get("large skeleton", {}).items():
+        ours, ref = r["stages clean..prune"]["min"], r["igl.cotmatrix, in process (reference)"]["min"]
+        print(f"mixture skeleton, {name}, {r['faces']:,} faces: stages clean..prune {ours:.3f} s = "
+              f"{ours / ref:.2f}x one igl.cotmatrix ({ref:.3f} s)")
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=1))
 

@@ -15,7 +15,10 @@ Builds, from the shared classic and Watertight meshes, six labelled collections 
   hands, an ant, two humans), so that classes differ in detail, not in kind;
 * ``hard_tune`` (seed 6, 60 % open): the 15 tune sources that no report collection shares, similar
   ones side by side -- a tune collection on which no part is near perfect (strong_tune and
-  similar_tune are: their best part reaches 0.98-1.00 mAP, so they cannot tell settings apart).
+  similar_tune are: their best part reaches 0.98-1.00 mAP, so they cannot tell settings apart);
+* ``fresh_report_open`` (seed 7, 60 % open) and ``fresh_similar_report`` (seed 8, 50 % open): the
+  report sources of ``strong_report_open`` and ``similar_report`` in new poses, cuts and class sizes,
+  built after those had been seen (report only).
 
 Each source gives a class of 3 to 20 near-isometric pose variants: ARAP (libigl ``arap``) with
 the core patch fixed and 4-6 extremity patches rotated by up to 110 degrees about the point halfway
@@ -156,7 +159,11 @@ def main() -> None:
             ("similar_tune", [watertight / s for s in SIMILAR_TUNE], 4, 0.5),
             ("similar_report", [watertight / s for s in SIMILAR_REPORT], 5, 0.5),
             ("hard_tune", [classic / s for s in HARD_TUNE_CLASSIC] + [watertight / s for s in SIMILAR_TUNE[1:]], 6,
-             0.6)):
+             0.6),
+            # fresh report collections, built after the earlier report ones had been seen (new poses,
+            # cuts and class sizes of the report sources)
+            ("fresh_report_open", [classic / s for s in REPORT], 7, 0.6),
+            ("fresh_similar_report", [watertight / s for s in SIMILAR_REPORT], 8, 0.5)):
         if args.only and name not in args.only:
             continue
         n = build(sources, args.out / name, seed=seed, open_fraction=open_fraction)

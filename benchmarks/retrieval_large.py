@@ -32,7 +32,7 @@ import numpy as np
 from topomatch.retrieval import open_index
 from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, get_method
 from topomatch.stages.retrieval.descriptor import Descriptor
-from topomatch.stages.retrieval.fusion import fuse
+from topomatch.stages.retrieval.fusion import fuse, scale_factor
 from topomatch.stages.retrieval.ranking import dissimilarities
 from topomatch.stages.retrieval.shortlist import (SHORTLIST, Shortlist, sample_fusion, shortlisted_dissimilarities,
                                                   vector_parts)
@@ -86,7 +86,7 @@ def main() -> None:
         query = {p: queries[p][q] for p in fusion.parts}
         t = time.perf_counter()
         exact = fuse([dissimilarities(query[p], database[p], p, options[p]) for p in decision.kept],
-                     [scales[p] for p in decision.kept], fusion.order_weights)
+                     [scales[p] * scale_factor(fusion, decision, p) for p in decision.kept], fusion.order_weights)
         t_exact.append(time.perf_counter() - t)
         exact_top.append(set(np.argsort(exact, kind="stable")[:10].tolist()))
     result = {"shapes": args.shapes, "queries": args.queries, "query_seed": args.query_seed,

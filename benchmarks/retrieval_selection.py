@@ -21,7 +21,8 @@ public API (:meth:`topomatch.retrieval.Collection.part_matrices`). Collections:
 
 When the two selections differ, the default is the one of their two settings with the better criterion
 pooled over both sides' tune collections. The grid: order weights (equal ... the two smallest), screening (none, 0.5, 0.6, 0.65, 0.7),
-re-ranking k (5, 10, auto = round(sqrt(n) / 2)). The criterion, computed on the tune side only:
+re-ranking k (5, 10, auto = round(sqrt(n) / 2)), agreement power (0, 1, 2, 4: each kept part's scale
+times its agreement relative to the best part's to that power). The criterion, computed on the tune side only:
 the worst margin over the tune collections of the fusion's mAP over its best part's mAP
 ("never worse than its best part"), then the mean mAP. The chosen settings and every method's
 NN / mAP on every report collection are printed (markdown) and written as JSON.
@@ -46,6 +47,8 @@ ORDER_WEIGHTS = {"equal": None, "1,1,.5,.25,.1": (1, 1, 0.5, 0.25, 0.1), "1,1,.5
                  "1,1,1 (median)": (1, 1, 1), "1,1,.5": (1, 1, 0.5), "1,1 (two smallest)": (1, 1)}
 RERANK = {"5": 5, "10": 10, "auto": "auto"}
 SCREEN = {"none": None, "0.5": 0.5, "0.6": 0.6, "0.65": 0.65, "0.7": 0.7}
+#: Agreement weighting (Fusion.agreement_power): 0 = off.
+POWER = {"0": 0.0, "1": 1.0, "2": 2.0, "4": 4.0}
 #: Degraded copies: part -> fraction of the shapes permuted.
 DEGRADED = {"D2, SH scrambled": {"d2": 1.0, "sh": 1.0}, "hidden-like": {"d2": 0.5, "sh": 0.5, "agd": 0.25}}
 
@@ -110,9 +113,10 @@ def main() -> None:
     best_part = {n: max(nn_map(c[0][p], c[1])[1] for p in base.parts) for n, c in colls.items()}
 
     grid = {}
-    for (w, ow), (k, rk), (s, sc) in itertools.product(ORDER_WEIGHTS.items(), RERANK.items(), SCREEN.items()):
-        fusion = replace(base, order_weights=ow, rerank_k=rk, screen=sc)
-        grid[f"weights {w}; k {k}; screen {s}"] = (fusion, {n: nn_map(fused_matrix([c[0][p] for p in base.parts],
+    for (w, ow), (k, rk), (s, sc), (a, pw) in itertools.product(ORDER_WEIGHTS.items(), RERANK.items(),
+                                                                 SCREEN.items(), POWER.items()):
+        fusion = replace(base, order_weights=ow, rerank_k=rk, screen=sc, agreement_power=pw)
+        grid[f"weights {w}; k {k}; screen {s}; agreement power {a}"] = (fusion, {n: nn_map(fused_matrix([c[0][p] for p in base.parts],
                                                                                   fusion), c[1])
                                                             for n, c in colls.items()})
 

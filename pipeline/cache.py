@@ -93,7 +93,7 @@ class Cache:
             warnings.warn(f"result not cached: {exc}", CacheWarning, stacklevel=2)
             return False
         try:
-            atomic_write_bytes(self._path(key), data)
+            atomic_write_bytes(self._path(key), data, durable=False)  # recomputable, checked on read
         except OSError as exc:
             warnings.warn(f"result not cached: cannot write {self._path(key)} ({exc})", CacheWarning, stacklevel=2)
             return False

@@ -141,7 +141,9 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     """
     import igl
 
-    _, _, SVJ, _ = igl.remove_duplicate_vertices(V, F, eps)
+    SV, _, SVJ, _ = igl.remove_duplicate_vertices(V, F, eps)
+    if SV.shape[0] == V.shape[0]:  # nothing merged
+        return V, F
     groups, first = np.unique(np.asarray(SVJ, dtype=np.int64), return_index=True)
     if groups.size == V.shape[0]:
         return V, F

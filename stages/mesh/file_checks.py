@@ -117,15 +117,10 @@ def _without_preamble(plain: Path, fmt: str, copy: Path) -> Path:
 
 def _content_lines(data: bytes) -> list[bytes]:
     """Lines without comments (``#`` to the end of the line) and without blank lines."""
-    out = []
-    for line in data.splitlines():
-        hashed = line.find(b"#")
-        if hashed >= 0:
-            line = line[:hashed]
-        line = line.strip()
-        if line:
-            out.append(line)
-    return out
+    lines = data.splitlines()
+    if b"#" in data:
+        lines = [line.split(b"#", 1)[0] for line in lines]
+    return list(filter(None, map(bytes.strip, lines)))
 
 
 def _int(token: bytes, path: Path, what: str) -> int:
@@ -153,11 +148,14 @@ def _face_sizes(face_lines: list[bytes], path: Path, line_offset: int) -> int:
 
 
 _HUGE_INT = re.compile(rb"(?:^|(?<=\s))-?\d{10,}(?=\s|$)", re.MULTILINE)
+_TEN_DIGITS = re.compile(rb"\d{10}")
 
 
 def _check_index_width(face_block: bytes, path: Path, n_vertices: int | None) -> None:
     """Refuse a face index too wide for the readers' 32-bit integers (they wrap it silently to a
     valid-looking index); ``face_block`` holds the face lines."""
+    if not _TEN_DIGITS.search(face_block):  # the common case, found by a simpler scan
+        return
     m = _HUGE_INT.search(face_block)
     if m:
         face = face_block.count(b"\n", 0, m.start()) + 1

@@ -97,6 +97,19 @@ class TopologyReport:
         return asdict(self)
 
 
+def _argsort_with_keys(key: np.ndarray, key_bound: int) -> tuple[np.ndarray, np.ndarray]:
+    """(order, key[order]) of non-negative int64 keys below ``key_bound``, equal keys in index order.
+
+    When a key and its index fit in 63 bits together, one ``np.sort`` of ``key << b | index``
+    (numpy's vectorised sort: about 4x faster than ``argsort`` on 4 M keys) gives both."""
+    bits = max(int(key.size - 1).bit_length(), 1)
+    if key_bound <= 1 << (63 - bits):
+        packed = np.sort((key << bits) | np.arange(key.size, dtype=np.int64))
+        return packed & ((1 << bits) - 1), packed >> bits
+    order = np.argsort(key, kind="stable")
+    return order, key[order]
+
+
 class HalfEdges:
     """The 3m half-edges of the triangles ``F`` (m, 3), sorted by their undirected edge, once.
 
@@ -113,8 +126,7 @@ class HalfEdges:
         self.forward = u < w  # the half-edge runs from lo to hi
         self.lo, self.hi = np.minimum(u, w), np.maximum(u, w)
         key = self.lo * max(n_vertices, 1) + self.hi
-        self.order = np.argsort(key)
-        sorted_key = key[self.order]
+        self.order, sorted_key = _argsort_with_keys(key, max(n_vertices, 1) ** 2)
         starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
         self.first = starts
         self.counts = np.diff(np.r_[starts, key.size]).astype(np.int64)
@@ -191,12 +203,56 @@ def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges |
     for that reason alone), vectorised: the corners of the faces are linked across every
     shared edge, and a vertex's fans are the connected components among its corners.
     ``half_edges``: the sorted half-edges of ``F``, if already computed.
+
+    A consistently oriented edge-manifold mesh (the usual input) takes :func:`_walk_fans`, a walk
+    around every vertex at once; other meshes the connected components of the corner graph.
     """
+    F = np.asarray(F, dtype=np.int64)
+    he = half_edges or HalfEdges(F, n_vertices)
+    if F.shape[0] and not (he.counts > 2).any() and he.consistently_oriented() and not (
+            (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).any():
+        return _walk_fans(F, n_vertices, he)
+    return _corner_graph_fans(F, n_vertices, he)
+
+
+def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges) -> np.ndarray:
+    """:func:`nonmanifold_vertices` of a consistently oriented edge-manifold mesh without repeated
+    indices, in O(m): the corners of a vertex are ordered around it by ``sigma`` (half-edge ``h``
+    leaves the vertex at its corner; ``sigma(h)`` is the twin of the half-edge entering that corner,
+    which leaves the same vertex in the next face), so every fan is a cycle or a path of ``sigma``. A
+    vertex has one fan iff it has at most one path start (a corner whose half-edge has no twin) and
+    the walk from it (or from any corner) visits all its corners. The walks run for all vertices at
+    once, one step per corner of the largest fan."""
+    m3 = 3 * F.shape[0]
+    twin = np.full(m3, -1, dtype=np.int64)
+    twin[he.pair_a], twin[he.pair_b] = he.pair_b, he.pair_a
+    h = np.arange(m3, dtype=np.int64)
+    sigma = twin[h - h % 3 + (h + 2) % 3]  # the twin of the previous half-edge of the face, -1 on the boundary
+    vertex = F.ravel()
+    corners = np.bincount(vertex, minlength=n_vertices)
+    open_start = twin < 0  # a corner no sigma step reaches: a path (open fan) starts there
+    starts = np.bincount(vertex[open_start], minlength=n_vertices)
+    first = np.full(n_vertices, -1, dtype=np.int64)
+    first[vertex[::-1]] = h[::-1]
+    first[vertex[open_start]] = h[open_start]
+    bad = starts > 1
+    todo = np.flatnonzero((corners > 0) & ~bad)
+    origin = first[todo]
+    current, steps = origin.copy(), np.ones(todo.size, dtype=np.int64)
+    while todo.size:
+        current = sigma[current]
+        ended = (current < 0) | (current == origin)
+        bad[todo[ended]] = steps[ended] != corners[todo[ended]]
+        keep = ~ended
+        todo, origin, current, steps = todo[keep], origin[keep], current[keep], steps[keep] + 1
+    return bad
+
+
+def _corner_graph_fans(F: np.ndarray, n_vertices: int, he: HalfEdges) -> np.ndarray:
+    """:func:`nonmanifold_vertices` of any mesh: connected components of the corner graph (scipy)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    F = np.asarray(F, dtype=np.int64)
-    he = half_edges or HalfEdges(F, n_vertices)
     m = F.shape[0]
     # half-edge h = 3 f + k runs from corner h to corner 3 f + (k + 1) % 3; the corner at lo / hi:
     nxt = (np.arange(3 * m, dtype=np.int64).reshape(m, 3)[:, [1, 2, 0]]).ravel()

@@ -59,7 +59,7 @@ class Isolines:
 
 
 def isolines(V: np.ndarray, F: np.ndarray, f: np.ndarray, levels: np.ndarray,
-             which: np.ndarray | None = None) -> Isolines:
+             which: np.ndarray | None = None, vertex_band: np.ndarray | None = None) -> Isolines:
     """Iso-curves of the piecewise-linear function ``f`` at the interior level values.
 
     Parameters
@@ -71,23 +71,32 @@ def isolines(V: np.ndarray, F: np.ndarray, f: np.ndarray, levels: np.ndarray,
         From :func:`level_values`; curves are computed at l_1..l_{N-1} (or at ``which``).
     which : (q,) int, optional
         Level indices to use instead of 1..N-1.
+    vertex_band : (n,) int, optional
+        ``band_index(f, levels)``, if already computed.
 
     A triangle contains a segment at l_k when its vertex bands satisfy
     min band < k <= max band; the end points lie on the two edges whose end
-    values straddle l_k (value >= l_k counts as above).
+    values straddle l_k (value >= l_k counts as above). Only the triangles spanning two bands or
+    more (a few percent) are sorted and interpolated.
     """
     V = np.asarray(V, dtype=np.float64)
     n_bands = len(levels) - 1
     ks = np.arange(1, n_bands) if which is None else np.asarray(which, dtype=np.int64)
-    fv = f[F]
+    vb = band_index(f, levels) if vertex_band is None else vertex_band
+    tb = vb[F]
+    lo, hi = tb.min(axis=1), tb.max(axis=1)  # bands of the lowest and highest vertex (band_index is monotone)
+    cross = np.flatnonzero(hi > lo)
+    Fc = F[cross]
+    fv = f[Fc]
     order = np.argsort(fv, axis=1, kind="stable")
-    Fs = np.take_along_axis(F, order, axis=1)          # vertices sorted by value: a, b, c
+    Fs = np.take_along_axis(Fc, order, axis=1)         # vertices sorted by value: a, b, c
     fs = np.take_along_axis(fv, order, axis=1)
-    bs = band_index(fs, levels)
-    faces, lvl = _crossings(bs[:, 0], bs[:, 2], ks)
+    local, lvl = _crossings(lo[cross], hi[cross], ks)
+    faces = cross[local]
+    Fs, fs = Fs[local], fs[local]
     x = levels[lvl]
-    a, b, c = Fs[faces, 0], Fs[faces, 1], Fs[faces, 2]
-    fa, fb, fc = fs[faces, 0], fs[faces, 1], fs[faces, 2]
+    a, b, c = Fs[:, 0], Fs[:, 1], Fs[:, 2]
+    fa, fb, fc = fs[:, 0], fs[:, 1], fs[:, 2]
     p_ac = _lerp(V[a], V[c], fa, fc, x)
     low_side = band_index(fb, levels) >= lvl           # the level lies between a and b
     p_ab = _lerp(V[a], V[b], fa, fb, x)
@@ -131,7 +140,8 @@ class LevelSets:
 def compute_level_sets(V: np.ndarray, F: np.ndarray, f: np.ndarray, n_levels: int) -> LevelSets:
     """Level values, vertex bands and iso-curves of the vertex function ``f`` (n,)."""
     values = level_values(f, n_levels)
-    return LevelSets(values, band_index(f, values), isolines(V, F, f, values))
+    vertex_band = band_index(f, values)
+    return LevelSets(values, vertex_band, isolines(V, F, f, values, vertex_band=vertex_band))
 
 
 class LevelSetParams(Params):

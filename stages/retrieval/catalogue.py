@@ -40,6 +40,11 @@ from topomatch.stages.retrieval.fusion import Fusion
 #: Cleaned mesh: the prefix of the vector baselines.
 CLEAN_CHAIN: tuple[Any, ...] = ("load", {"clean": {"components": "largest"}})
 
+#: Sampling of the extrinsic methods: a quarter of the stages' defaults (2^18 pairs, 2^17 points), chosen
+#: by ``benchmarks/retrieval_part_costs.py`` on tune collections (same retrieval, 4x less sampling).
+D2_PAIRS = 1 << 16
+SH_POINTS = 1 << 15
+
 #: Cleaned, decimated (6,000 faces) mesh and its 60 leading eigenpairs: the intrinsic methods' prefix.
 SPECTRAL_CHAIN: tuple[Any, ...] = CLEAN_CHAIN + (
     {"decimate": {"target_faces": 6000}},
@@ -109,14 +114,16 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            distance=shapedna.distance_matrix),
     Method("shapedna-full", "ShapeDNA with its own eigen-solve on the full mesh (consistent FEM mass; kept for "
            "comparison)", "vector", CLEAN_CHAIN + ("shapedna",), distance=shapedna.distance_matrix),
-    Method("d2", "D2 shape distribution (Osada 2002)", "vector", CLEAN_CHAIN + ("d2",),
-           distance=d2.distance_matrix),
-    Method("sh", "rotation-invariant spherical harmonics (Kazhdan 2003)", "vector",
-           CLEAN_CHAIN + ("spherical_harmonics",), distance=spherical_harmonics.distance_matrix),
-    Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: parts screened by their agreement, "
-           "order-weighted (a pair's two smallest scaled dissimilarities averaged), re-ranked by manifold ranking "
-           "(k from the collection's size)", "fusion",
-           fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.9, order_weights=(1, 1), screen=0.5)),
+    Method("d2", "D2 shape distribution (Osada 2002), 2^16 point pairs", "vector",
+           CLEAN_CHAIN + ({"d2": {"n_pairs": D2_PAIRS}},), distance=d2.distance_matrix),
+    Method("sh", "rotation-invariant spherical harmonics (Kazhdan 2003), 2^15 surface points", "vector",
+           CLEAN_CHAIN + ({"spherical_harmonics": {"n_points": SH_POINTS}},),
+           distance=spherical_harmonics.distance_matrix),
+    Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: each part weighted by its agreement with "
+           "the others (a part that agrees less looks farther), a pair's two smallest scaled dissimilarities averaged, "
+           "re-ranked by manifold ranking (k from the collection's size)", "fusion",
+           fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.9, order_weights=(1, 1), screen=None,
+                         agreement_power=4.0)),
     Method("topomatch-equal", "the first fusion (kept for comparison): agd, hks, shapedna, d2 and sh with equal "
            "weights, manifold ranking with k = 10", "fusion",
            fusion=Fusion(FUSION_PARTS, rerank_k=10, rerank_alpha=0.9)),

@@ -60,6 +60,10 @@ class Fusion:
         the parts kept, then normalised); None = equal weights (a plain sum).
     screen : float, optional
         Drop parts whose agreement is below ``screen`` times the best part's; None = keep all.
+    agreement_power : float
+        A kept part's scale is multiplied by (its agreement / the best agreement) ** agreement_power:
+        a part that agrees less with the others looks farther, so the order weighting counts it
+        less (:func:`scale_factor`); 0 = every part at its median scale.
     """
 
     parts: tuple[str, ...]
@@ -67,6 +71,7 @@ class Fusion:
     rerank_alpha: float
     order_weights: tuple[float, ...] | None = None
     screen: float | None = None
+    agreement_power: float = 0.0
 
     def with_parts(self, parts, rerank_k=...) -> "Fusion":
         """The same fusion over other parts (and optionally another ``rerank_k``)."""
@@ -79,7 +84,7 @@ class FusionDecision:
 
     kept: tuple[str, ...]
     dropped: tuple[str, ...]
-    agreement: dict[str, float]  # empty when the fusion does not screen
+    agreement: dict[str, float]  # empty when the fusion neither screens nor weights by agreement
     rerank_k: int | None
 
     def to_dict(self) -> dict:
@@ -108,23 +113,30 @@ def fuse(parts: list[np.ndarray], scales: list[float], order_weights: tuple[floa
     if order_weights is None:
         return sum(scaled)
     w = np.asarray(order_weights[: len(scaled)], dtype=np.float64)
-    stack = np.stack(scaled)
-    # only the len(w) smallest values of each element are weighted: partial sort
-    smallest = np.sort(stack, axis=0) if len(w) == len(scaled) else \
-        np.partition(stack, list(range(len(w))), axis=0)[: len(w)]
+    if any(np.isnan(x).any() for x in scaled):  # NaN sorts last in np.sort, but min/max would spread it
+        smallest = np.sort(np.stack(scaled), axis=0)[: len(w)]
+    else:
+        smallest = np.stack(_sorted_elementwise(scaled)[: len(w)])
     return np.tensordot(w / w.sum(), smallest, axes=1)
 
 
+def _sorted_elementwise(arrays: list[np.ndarray]) -> list[np.ndarray]:
+    """The arrays' values sorted element by element, smallest first (as ``np.sort(np.stack(arrays), axis=0)``
+    without NaN), by an odd-even transposition network of ``np.minimum`` / ``np.maximum``: for the few parts
+    of a fusion about 10x faster than sorting along a short first axis, and exact (no arithmetic)."""
+    vals = list(arrays)
+    for r in range(len(vals)):
+        for i in range(r % 2, len(vals) - 1, 2):
+            vals[i], vals[i + 1] = np.minimum(vals[i], vals[i + 1]), np.maximum(vals[i], vals[i + 1])
+    return vals
+
+
 def _neighbour_sets(D: np.ndarray, k: int) -> np.ndarray:
-    """(n, n) bool: row i marks the k nearest other items of item i (ties broken arbitrarily)."""
+    """(n, k) int: row i holds the k nearest other items of item i (in no order; ties broken arbitrarily)."""
     D = np.array(D, dtype=np.float64)
     D[~np.isfinite(D)] = np.inf
     np.fill_diagonal(D, np.inf)
-    n = len(D)
-    near = np.argpartition(D, k - 1, axis=1)[:, :k]
-    mask = np.zeros((n, n), dtype=bool)
-    mask[np.arange(n)[:, None], near] = True
-    return mask
+    return np.argpartition(D, k - 1, axis=1)[:, :k]
 
 
 def agreement(part_matrices: list[np.ndarray], k: int = AGREEMENT_NEIGHBOURS) -> np.ndarray:
@@ -134,7 +146,8 @@ def agreement(part_matrices: list[np.ndarray], k: int = AGREEMENT_NEIGHBOURS) ->
         return np.ones(len(part_matrices))
     k = min(k, n - 1)
     sets = [_neighbour_sets(P, k) for P in part_matrices]
-    pair = np.array([[np.logical_and(a, b).sum() / (n * k) for b in sets] for a in sets])
+    # common neighbours of two parts, row by row: (n, k, k) comparisons of k distinct indices each
+    pair = np.array([[(a[:, :, None] == b[:, None, :]).sum() / (n * k) for b in sets] for a in sets])
     return (pair.sum(axis=1) - np.diag(pair)) / (len(sets) - 1)
 
 
@@ -148,10 +161,10 @@ def rerank_neighbours(fusion: Fusion, n: int) -> int | None:
 def decide(part_matrices: list[np.ndarray], fusion: Fusion, graph_size: int | None = None) -> FusionDecision:
     """Screen the parts of ``fusion`` on a database's (n, n) part matrices (module docstring, step 1)."""
     n = graph_size if graph_size is not None else len(part_matrices[0])
-    if fusion.screen is None:
+    if fusion.screen is None and not fusion.agreement_power:
         return FusionDecision(fusion.parts, (), {}, rerank_neighbours(fusion, n))
     a = agreement(part_matrices)
-    keep = a >= fusion.screen * a.max()
+    keep = a >= (fusion.screen or 0.0) * a.max()
     return FusionDecision(tuple(p for p, k in zip(fusion.parts, keep) if k),
                           tuple(p for p, k in zip(fusion.parts, keep) if not k),
                           {p: float(x) for p, x in zip(fusion.parts, a)}, rerank_neighbours(fusion, n))
@@ -218,12 +231,26 @@ def _kept(items: list, fusion: Fusion, decision: FusionDecision) -> list:
     return [x for p, x in zip(fusion.parts, items) if p in decision.kept]
 
 
+def scale_factor(fusion: Fusion, decision: FusionDecision, part: str) -> float:
+    """Multiplier of a kept part's median scale: (agreement / best agreement) ** agreement_power (1 when off)."""
+    if not fusion.agreement_power or not decision.agreement:
+        return 1.0
+    best = max(decision.agreement.values())
+    return (max(decision.agreement[part], 1e-12) / best) ** fusion.agreement_power if best > 0 else 1.0
+
+
+def kept_scales(part_matrices: list[np.ndarray], fusion: Fusion, decision: FusionDecision) -> list[float]:
+    """The scales of the kept parts (median dissimilarity times :func:`scale_factor`), in ``decision.kept`` order."""
+    return [median_scale(P) * scale_factor(fusion, decision, p)
+            for p, P in zip(fusion.parts, part_matrices) if p in decision.kept]
+
+
 def fused_matrix(part_matrices: list[np.ndarray], fusion: Fusion, decision: FusionDecision | None = None) -> np.ndarray:
     """(n, n) fused (and re-ranked) dissimilarities of a collection from its parts' (n, n) matrices
     (what was kept and why: :func:`decide`, computed here unless given)."""
     decision = decision or decide(part_matrices, fusion)
     mats = _kept(part_matrices, fusion, decision)
-    D = fuse(mats, [median_scale(P) for P in mats], fusion.order_weights)
+    D = fuse(mats, kept_scales(part_matrices, fusion, decision), fusion.order_weights)
     k = decision.rerank_k
     return manifold_ranking(D, k, fusion.rerank_alpha) if k else D
 
@@ -241,7 +268,7 @@ def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], f
     n = len(query_rows[0])
     decision = decision or decide(part_matrices, fusion, graph_size=n + 1)
     rows, mats = _kept(query_rows, fusion, decision), _kept(part_matrices, fusion, decision)
-    scales = [median_scale(P) for P in mats]
+    scales = kept_scales(part_matrices, fusion, decision)
     row = fuse(rows, scales, fusion.order_weights)
     if not decision.rerank_k:
         return row

@@ -38,9 +38,10 @@ SAMPLE = 1000
 LARGE_INDEX = 5000
 
 #: Shortlist length per query (at least 20 times the results asked for). Chosen on the tuning queries
-#: of ``benchmarks/retrieval_large.py --query-seed 1`` (the smallest length with recall@10 1.0 there:
-#: 300 gave 0.990, 500 0.993, 800 1.000) and reported on other queries (docs/speed.md).
-SHORTLIST = 800
+#: of ``benchmarks/retrieval_large.py --query-seed 1`` (the smallest length with recall@10 1.0 there;
+#: with the agreement-weighted default fusion 300 gave 0.968, 800 0.995, 1200 1.000) and reported on
+#: other queries (docs/speed.md).
+SHORTLIST = 1200
 
 
 def shape_key(path: str) -> int:
@@ -165,7 +166,7 @@ def shortlisted_dissimilarities(query: dict, descriptors: dict, fusion, ann: Sho
 
     ``query``: part -> the query's Descriptor; ``keys``: (n,) the database shapes' graph keys.
     """
-    from topomatch.stages.retrieval.fusion import fuse
+    from topomatch.stages.retrieval.fusion import fuse, scale_factor
     from topomatch.stages.retrieval.ranking import dissimilarities
 
     found = ann.search({p: query[p].data.ravel() for p in ann.parts}, count)
@@ -174,5 +175,5 @@ def shortlisted_dissimilarities(query: dict, descriptors: dict, fusion, ann: Sho
     cand = order[at][keys[order][at] == found]  # the database rows of the keys found (a stale key is skipped)
     rows = [dissimilarities(query[p], [descriptors[p][i] for i in cand], p, options(p)) for p in decision.kept]
     d = np.full(len(keys), np.inf)
-    d[cand] = fuse(rows, [scales[p] for p in decision.kept], fusion.order_weights)
+    d[cand] = fuse(rows, [scales[p] * scale_factor(fusion, decision, p) for p in decision.kept], fusion.order_weights)
     return d

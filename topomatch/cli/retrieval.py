@@ -187,7 +187,7 @@ def cmd_query(args: argparse.Namespace) -> int:
         for r in result.results:
             print(f"  {r['rank']:>3}. {r['dissimilarity']:.5f}  {r['label'] or '':<12} {r['path']}")
         if result.fusion is not None:
-            print(fusion_line(result.fusion))
+            print(fusion_line(result.fusion, args.method))
     return 0
 
 
@@ -201,13 +201,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
         print(ev.metrics.table(args.method))
         print(f"{ev.n} shapes; matrix ({ev.matrix_seconds:.2f} s) written to {ev.matrix}")
         if ev.fusion is not None:
-            print(fusion_line(ev.fusion))
+            print(fusion_line(ev.fusion, args.method))
     return 0
 
 
-def fusion_line(decision: dict) -> str:
-    """One line saying what a fusion did (FusionDecision.to_dict())."""
+def fusion_line(decision: dict, method: str) -> str:
+    """One line saying what the fusion ``method`` did (``decision``: FusionDecision.to_dict())."""
+    from topomatch.stages.retrieval.catalogue import get_method
+
+    screen = get_method(method).fusion.screen
     agreement = ", ".join(f"{p} {a:.2f}" for p, a in decision["agreement"].items()) or "not screened"
-    dropped = f"; dropped {', '.join(decision['dropped'])} (agreement below half the best)" if decision["dropped"] else ""
+    dropped = (f"; dropped {', '.join(decision['dropped'])} (agreement below {screen:g} x the best)"
+               if decision["dropped"] else "")
     k = decision["rerank_k"] if decision["rerank_k"] is not None else "none"
     return f"fusion: kept {', '.join(decision['kept'])}{dropped}; part agreement {agreement}; re-ranking k = {k}"

@@ -87,9 +87,9 @@ def sample_surface(V: np.ndarray, F: np.ndarray, n: int, rng: np.random.Generato
         order = rng.permutation(n)
         face, r = face[order], r[:, order]
     s = np.sqrt(r[0])
-    corners = F[face]  # (n, 3)
-    return ((1.0 - s)[:, None] * V[corners[:, 0]] + (s * (1.0 - r[1]))[:, None] * V[corners[:, 1]]
-            + (s * r[1])[:, None] * V[corners[:, 2]])
+    corners = V[F][face]  # (n, 3, 3): one gather of whole triangles instead of three of vertices
+    return ((1.0 - s)[:, None] * corners[:, 0] + (s * (1.0 - r[1]))[:, None] * corners[:, 1]
+            + (s * r[1])[:, None] * corners[:, 2])
 
 
 def area_centroid_and_rms_radius(V: np.ndarray, F: np.ndarray, areas: np.ndarray | None = None

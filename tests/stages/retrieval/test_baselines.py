@@ -293,3 +293,16 @@ def test_params_parse_strictly():
 def test_triangle_areas():
     V = np.array([[0.0, 0, 0], [2, 0, 0], [0, 3, 0]])
     np.testing.assert_allclose(triangle_areas(V, np.array([[0, 1, 2]])), [3.0])
+
+
+def test_shapedna_read_from_the_shared_spectrum_of_the_unit_sphere(sphere):
+    from topomatch.pipeline.contract import StageError
+    from topomatch.stages.spectral.spectrum import mesh_spectrum
+
+    spectrum = mesh_spectrum(sphere, 30)  # the intrinsic parts' spectrum: lumped (Voronoi) mass
+    x = shapedna.from_spectrum(spectrum, 24, normalization="area")
+    expected = 4 * np.pi * np.repeat([2, 6, 12, 20], [3, 5, 7, 9])
+    np.testing.assert_allclose(x, expected, rtol=0.01)
+    np.testing.assert_allclose(shapedna.from_spectrum(spectrum, 24), x / np.arange(1, 25), rtol=1e-12)
+    with pytest.raises(StageError, match="raise spectrum.k"):
+        shapedna.from_spectrum(spectrum, 31)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
@@ -138,3 +140,40 @@ def test_adaptive_query_of_a_duplicate_ranks_it_first_and_agrees_with_the_collec
     R = fused_matrix(parts, fusion)
     top = lambda r: set(np.argsort(r, kind="stable")[:6])  # noqa: E731
     assert len(top(d) & top(R[i])) >= 5
+
+
+def test_agreement_weighting_pushes_parts_without_class_information_out_of_the_two_smallest():
+    from topomatch.stages.retrieval.fusion import decide, scale_factor
+
+    X, y = _clusters()
+    good = [cdist(X, X), cdist(X, X, "cityblock")]
+    junk = [_scrambled(good[0], 1), _scrambled(good[1], 2)]
+    weighted = Fusion(("a", "b", "c", "d"), None, 0.9, order_weights=(1, 1), agreement_power=4.0)
+    decision = decide(good + junk, weighted)
+    assert decision.kept == ("a", "b", "c", "d") and decision.dropped == ()  # weighted, not dropped
+    factors = [scale_factor(weighted, decision, p) for p in "abcd"]
+    assert max(factors) == 1.0 and max(factors[2:]) < 0.05 * min(factors[:2])  # chance-level agreement
+    # the junk parts then almost never enter a pair's two smallest: the ranking is the good parts'
+    alone = fused_matrix(good, Fusion(("a", "b"), None, 0.9, order_weights=(1, 1)))
+    mixed = fused_matrix(good + junk, weighted)
+    assert first_tier(mixed, y) >= first_tier(alone, y) - 0.02
+    assert first_tier(mixed, y) > first_tier(fused_matrix(good + junk, replace(weighted, agreement_power=0.0)), y)
+    # a query ranks as the collection does
+    i = 7
+    d = fused_query([P[i] for P in good + junk], good + junk, replace(weighted, rerank_k="auto"))
+    R = fused_matrix(good + junk, replace(weighted, rerank_k="auto"))
+    assert np.argmin(d) == i
+    assert len(set(np.argsort(d, kind="stable")[:6]) & set(np.argsort(R[i], kind="stable")[:6])) >= 5
+
+
+def test_order_weighted_fusion_equals_the_sorted_stack_formula():
+    rng = np.random.default_rng(5)
+    parts = [rng.random((30, 30)) for _ in range(5)]
+    parts[2][3, 4] = np.inf
+    parts[1][:5] = parts[0][:5]  # ties
+    for w in ((1, 1), (1, 1, 0.5, 0.25, 0.1), (2, 1, 1)):
+        stack = np.sort(np.stack([P / s for P, s in zip(parts, (1, 2, 3, 4, 5))]), axis=0)[: len(w)]
+        expected = np.tensordot(np.asarray(w) / sum(w), stack, axes=1)
+        np.testing.assert_array_equal(fuse(parts, [1, 2, 3, 4, 5], w), expected)
+    parts[4][0, 0] = np.nan  # the sorted-stack path: NaN last
+    assert np.isfinite(fuse(parts, [1] * 5, (1, 1))[0, 0])
