@@ -276,4 +276,10 @@ def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], f
     A[:n, :n] = fuse(mats, scales, fusion.order_weights)
     A[n, :n] = A[:n, n] = row
     score = 1.0 - manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha)[:n]  # the query's own node left out
-    return 1.0 - score / score.max()  # 0 for the best database match
+    out = 1.0 - score / score.max()  # 0 for the best database match
+    # a database item identical to the query in every kept part comes first: on a small graph the
+    # diffusion can score a well-connected neighbour above it
+    same = row == 0
+    if same.any():
+        out = np.where(same, 0.0, np.maximum(out, np.finfo(float).tiny))
+    return out

@@ -177,3 +177,17 @@ def test_order_weighted_fusion_equals_the_sorted_stack_formula():
         np.testing.assert_array_equal(fuse(parts, [1, 2, 3, 4, 5], w), expected)
     parts[4][0, 0] = np.nan  # the sorted-stack path: NaN last
     assert np.isfinite(fuse(parts, [1] * 5, (1, 1))[0, 0])
+
+
+def test_an_item_identical_to_the_query_ranks_first_even_on_a_tiny_graph():
+    # small random collections where the diffusion alone scores a well-connected neighbour of the
+    # query above the query's own copy (seeds 0, 5, 7 did before the fix)
+    for seed in range(10):
+        r = np.random.default_rng(seed)
+        n = int(r.integers(6, 14))
+        X = r.random((n, 3)) * r.uniform(0.2, 1, (1, 3))
+        parts = [cdist(X, X), cdist(X, X, "cityblock")]
+        fusion = Fusion(("a", "b"), "auto", 0.9, order_weights=(1, 1), agreement_power=4.0)
+        for q in range(n):
+            d = fused_query([P[q] for P in parts], parts, fusion)
+            assert d[q] == 0.0 and (np.delete(d, q) > 0).all(), (seed, q)
