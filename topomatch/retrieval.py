@@ -469,8 +469,7 @@ class Collection:
                    and bool(np.all(ann.index.contains(keys))))
         if current:
             d = ann.sample["decision"]
-            return ann, keys, ann.sample["scales"], FusionDecision(tuple(d["kept"]), tuple(d["dropped"]),
-                                                                   d["agreement"], None)
+            return ann, keys, ann.sample["scales"], dataclasses.replace(FusionDecision.from_dict(d), rerank_k=None)
         scales, decision = sample_fusion(descriptors, m.fusion, lambda p: self._part_options(p, m, options))
         parts = vector_parts(decision)
         if not parts:

@@ -239,12 +239,15 @@ def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges) -> np.ndarray:
     todo = np.flatnonzero((corners > 0) & ~bad)
     origin = first[todo]
     current, steps = origin.copy(), np.ones(todo.size, dtype=np.int64)
-    while todo.size:
+    for _ in range(int(corners.max(initial=0))):  # a walk never takes more steps than its vertex has corners
+        if not todo.size:
+            break
         current = sigma[current]
         ended = (current < 0) | (current == origin)
         bad[todo[ended]] = steps[ended] != corners[todo[ended]]
         keep = ~ended
         todo, origin, current, steps = todo[keep], origin[keep], current[keep], steps[keep] + 1
+    bad[todo] = True  # a walk that did not end: not one fan (cannot happen on a mesh that passed the checks)
     return bad
 
 

@@ -15,8 +15,9 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
 - ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum (read from
   the shared spectrum; ``shapedna-full``: its own eigen-solve on the full mesh, kept for comparison);
 - ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
-- ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (parts that agree with the
-  others at chance level dropped, order-weighted, re-ranked by manifold ranking);
+- ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (each part weighted by its
+  agreement with the others, a pair's two smallest scaled dissimilarities averaged, re-ranked by
+  manifold ranking);
   ``topomatch-equal``: the first fusion (equal weights, k = 10), kept for comparison.
 
 The intrinsic methods (agd, hks, shapedna) work on a copy decimated to 6,000 faces and share its 60

@@ -6,12 +6,14 @@ signatures, ShapeDNA, D2, spherical harmonics). Each part's dissimilarities are 
 that part's **median dissimilarity over the database**, so that every part has the same typical size.
 Then, with no labels, from the collection itself:
 
-1. **Screening** (``screen``): each part's k = 5 nearest neighbours of every database item are
-   compared with every other part's; a part whose mean overlap (its *agreement*) is below
-   ``screen`` times the best part's is dropped. A part that carries no class information on a
-   collection (D2 or spherical harmonics on articulated shapes in new poses) agrees with the
-   others at chance level; parts that see the same classes agree far above it (measured in
-   docs/retrieval.md: 0.04-0.08 against 0.19-0.47).
+1. **Agreement** (``agreement_power``, ``screen``): each part's k = 5 nearest neighbours of every
+   database item are compared with every other part's; the mean overlap is the part's
+   *agreement*. A part that carries no class information on a collection (D2 or spherical
+   harmonics on articulated shapes in new poses) agrees with the others at chance level; parts
+   that see the same classes agree far above it (measured in docs/retrieval.md: 0.04-0.08 against
+   0.19-0.47). Each kept part's scale is multiplied by (agreement / best)^agreement_power, so a
+   part that agrees less looks farther and drops out of the smallest values of step 2; ``screen``
+   drops parts below that fraction of the best agreement outright.
 2. **Order-weighted averaging** (``order_weights``; R. R. Yager, IEEE SMC 1988): for each pair of
    shapes the parts' scaled dissimilarities are sorted, smallest first, and averaged with
    decreasing weights, so a pair that two parts find close is close even when a third finds it
@@ -90,6 +92,11 @@ class FusionDecision:
     def to_dict(self) -> dict:
         return {"kept": list(self.kept), "dropped": list(self.dropped),
                 "agreement": {p: round(a, 4) for p, a in self.agreement.items()}, "rerank_k": self.rerank_k}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "FusionDecision":
+        """The decision :meth:`to_dict` wrote (agreements rounded to 4 decimals)."""
+        return cls(tuple(d["kept"]), tuple(d["dropped"]), dict(d["agreement"]), d.get("rerank_k"))
 
 
 def median_scale(D: np.ndarray) -> float:

@@ -208,10 +208,17 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 def fusion_line(decision: dict, method: str) -> str:
     """One line saying what the fusion ``method`` did (``decision``: FusionDecision.to_dict())."""
     from topomatch.stages.retrieval.catalogue import get_method
+    from topomatch.stages.retrieval.fusion import FusionDecision, scale_factor
 
-    screen = get_method(method).fusion.screen
-    agreement = ", ".join(f"{p} {a:.2f}" for p, a in decision["agreement"].items()) or "not screened"
-    dropped = (f"; dropped {', '.join(decision['dropped'])} (agreement below {screen:g} x the best)"
+    fusion = get_method(method).fusion
+    agreement = ", ".join(f"{p} {a:.2f}" for p, a in decision["agreement"].items()) or "not measured"
+    dropped = (f"; dropped {', '.join(decision['dropped'])} (agreement below {fusion.screen:g} x the best)"
                if decision["dropped"] else "")
+    weights = ""
+    if fusion.agreement_power and decision["agreement"]:
+        made = FusionDecision.from_dict(decision)
+        weights = (f"; weight (agreement / best)^{fusion.agreement_power:g}: "
+                   + ", ".join(f"{p} {scale_factor(fusion, made, p):.2f}" for p in decision["kept"]))
     k = decision["rerank_k"] if decision["rerank_k"] is not None else "none"
-    return f"fusion: kept {', '.join(decision['kept'])}{dropped}; part agreement {agreement}; re-ranking k = {k}"
+    return (f"fusion: kept {', '.join(decision['kept'])}{dropped}; part agreement {agreement}{weights}; "
+            f"re-ranking k = {k}")
