@@ -137,7 +137,7 @@ def test_fused_topomatch_method(collection, tmp_path, capsys):
     assert sorted(fusion["kept"] + fusion["dropped"]) == sorted(("agd", "hks", "shapedna", "d2", "sh"))
     assert max(fusion["agreement"].values()) <= 1 and fusion["rerank_k"] == 3
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch-equal", "--out", tmp_path / "E.npz")
-    assert code == 0 and "fusion: kept agd, hks, shapedna, d2, sh; part agreement not screened" in out
+    assert code == 0 and "fusion: kept agd, hks, shapedna, d2, sh; part agreement not measured" in out
     # a fusion needs an index: match explains and exits 2
     code, _, err = run(capsys, "match", collection / "torus.off", collection / "torus.off", "--method", "topomatch")
     assert code == 2 and "fused method" in err and "agd" in err
