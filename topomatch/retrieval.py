@@ -199,6 +199,7 @@ class IndexReport:
     seconds: float
     open_meshes: list[str] = field(default_factory=list)  # meshes indexed now that have boundaries
     multi_component_meshes: list[str] = field(default_factory=list)  # ... with several components (largest kept)
+    removed: int = 0  # rows of files no longer in the indexed folders, deleted
 
     @property
     def failed(self) -> int:
@@ -242,6 +243,8 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     plans: dict[str, tuple[PartReport, dict]] = {}
     todo: dict[str, list] = {}  # mesh -> its part items: one work unit, the shared stages computed once
     with ShapeIndex(db_path) as store:
+        folders = [Path(p).resolve() for p in paths if Path(p).is_dir()]
+        removed = store.remove_missing(folders, {str(f) for f in files}, get_method(method).parts) if folders else 0
         for part in get_method(method).parts:
             experiment = method_experiment(part, files, workers=workers, executor=executor)
             params, phash = params_of(experiment)
@@ -272,7 +275,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
         if label_of:
             store.set_labels(label_of)
         for report, _ in plans.values():
-            if report.failed:
+            if report.failed or report.failed_before:
                 report.failures = [row.reason or "" for row in store.rows(report.method, report.params_hash,
                                                                           status="failed")]
     if get_method(method).fusion is not None:
@@ -280,7 +283,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     cleans = {path: c for path, c in shapes.items() if c is not None}
     return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0,
                        sorted(p for p, c in cleans.items() if c.after.n_boundary_loops > 0),
-                       sorted(p for p, c in cleans.items() if c.dropped_components > 0))
+                       sorted(p for p, c in cleans.items() if c.dropped_components > 0), removed)
 
 
 def _update_shortlist(db: Path, method: str, indexed: set[str]) -> None:
@@ -437,6 +440,9 @@ class Collection:
             d, decision = fused_query(rows_d, mats, m.fusion, chosen), chosen.to_dict()
         else:
             d = dissimilarities(query[m.name], descriptors[m.name], m.name, self._part_options(m.name, m, options))
+        if np.isnan(d).any():  # never dropped silently (inf, a shape outside the shortlist, is)
+            raise StageError(f"{self.db}: the {method} ranking of {mesh} is undefined (NaN) for "
+                             f"{int(np.isnan(d).sum())} of {len(d)} shapes")
         order = np.argsort(d, kind="stable")[:k]
         t_rank = time.perf_counter() - t
         endpoints = next((q.n_endpoints for q in query.values() if q.n_endpoints is not None), None)
@@ -517,6 +523,8 @@ class Collection:
         rows = [rows[i] for i in keep]
         labels = np.array([r.label for r in rows])
         path = Path(out) if out else self.db.with_suffix(f".{method}.npz")
+        if path.suffix != ".npz":  # numpy would add it: name the file that is written
+            path = path.with_name(path.name + ".npz")
         if not path.parent.is_dir():  # before the matrix is computed, not after
             raise InputError(path.parent, "not a folder to write the matrix into")
         sizes = {c: int((labels == c).sum()) for c in set(labels)}

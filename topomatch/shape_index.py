@@ -172,7 +172,10 @@ class ShapeIndex:
     def put(self, *, content_hash: str, path: str, label: str | None, method: str, params_hash: str, params: dict,
             status: str, reason: str | None = None, n_endpoints: int | None = None, kind: str | None = None,
             descriptor: np.ndarray | None = None, seconds: float | None = None) -> None:
-        """Insert or replace one row and commit (a lock held by another process is waited for)."""
+        """Insert or replace one row and commit (a lock held by another process is waited for); a row of an
+        earlier content of the same file (same path, method and params) is replaced too."""
+        self._sql("DELETE FROM shapes WHERE path = ? AND method = ? AND params_hash = ? AND content_hash != ?",
+                  (path, method, params_hash, content_hash))
         self._sql(
             "INSERT OR REPLACE INTO shapes (content_hash, path, label, method, params_hash, params, status, reason,"
             " n_endpoints, kind, descriptor, seconds, created) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
@@ -180,6 +183,18 @@ class ShapeIndex:
              None if descriptor is None else _to_blob(descriptor), seconds,
              datetime.now(timezone.utc).isoformat(timespec="seconds")))
         self._commit()
+
+    def remove_missing(self, folders: list[Path], present: set[str], methods: tuple[str, ...]) -> int:
+        """Delete the rows of ``methods`` whose file lies under one of ``folders`` but is not in ``present``
+        (resolved paths): files deleted or renamed since they were indexed. Returns the count."""
+        removed = 0
+        marks = ",".join("?" * len(methods))
+        for row_id, path in self._sql(f"SELECT id, path FROM shapes WHERE method IN ({marks})", methods):
+            if path not in present and any(Path(path).is_relative_to(f) for f in folders):
+                self._sql("DELETE FROM shapes WHERE id = ?", (row_id,))
+                removed += 1
+        self._commit()
+        return removed
 
     def _commit(self) -> None:
         try:

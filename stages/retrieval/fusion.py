@@ -186,7 +186,10 @@ def _ranking_graph(D: np.ndarray, k: int) -> np.ndarray:
     np.fill_diagonal(D, 0.0)
     k = max(1, min(k, n - 1))
     order = np.argpartition(D, k, axis=1)  # [:, k] is the k-th nearest, [:, :k + 1] the k + 1 nearest
-    scale = np.maximum(D[np.arange(n), order[:, k]], 1e-300)
+    # items with k or more exact duplicates have a k-th distance of 0: a floor relative to the matrix
+    # keeps s_i s_j a normal number (1e-300 squared underflowed to 0, and 0 / 0 made NaN)
+    largest = float(D.max(initial=0.0))
+    scale = np.maximum(D[np.arange(n), order[:, k]], 1e-12 * largest if largest > 0 else 1.0)
     W = np.exp(-D ** 2 / (scale[:, None] * scale[None, :]))
     keep = np.zeros((n, n), dtype=bool)
     keep[np.arange(n)[:, None], order[:, : k + 1]] = True

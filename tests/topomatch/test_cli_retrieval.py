@@ -69,8 +69,26 @@ def test_bad_mesh_is_recorded_and_the_others_indexed(collection, tmp_path, capsy
     status = dict(sqlite3.connect(db).execute("SELECT path, status FROM shapes").fetchall())
     assert sum(s == "failed" for s in status.values()) == 1
     # a re-run skips the failed mesh, says so, and still exits 1
+    code, out, err = run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
+    assert code == 1 and "0 indexed, 0 failed, 6 unchanged (skipped), 1 failed before" in out
+    assert "broken.off" in err  # the failure the error message points at is listed on this run too
+
+
+def test_changed_and_deleted_files_leave_no_stale_rows(collection, tmp_path, capsys):
+    db = tmp_path / "index.db"
+    code, _, _ = run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
+    assert code == 0
+    torus, changed, gone = collection / "torus.off", collection / "eight_genus2.off", collection / "odedstein_hand_lowres.obj.gz"
+    changed.write_bytes(torus.read_bytes())  # eight_genus2.off now holds the torus
+    gone.unlink()
     code, out, _ = run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
-    assert code == 1 and "0 indexed, 0 failed, 7 unchanged (skipped), 1 failed before" in out
+    assert code == 0 and "1 indexed, 0 failed, 4 unchanged" in out
+    assert "1 rows of files no longer in the indexed folders were removed" in out
+    paths = [p for (p,) in sqlite3.connect(db).execute("SELECT path FROM shapes WHERE method = 'd2'")]
+    assert len(paths) == len(set(paths)) == len(MESHES) - 1 and str(gone.resolve()) not in paths
+    code, out, _ = run(capsys, "query", torus, "--db", db, "--method", "d2", "-k", "10", "--json")
+    hits = {r["path"]: r["dissimilarity"] for r in json.loads(out)["results"]}
+    assert len(hits) == len(MESHES) - 1 and hits[str(changed.resolve())] == 0.0  # the new content, once
 
 
 def test_interrupted_index_resumes(collection, tmp_path, capsys, monkeypatch):

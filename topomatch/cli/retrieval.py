@@ -149,16 +149,20 @@ def cmd_index(args: argparse.Namespace) -> int:
         print_json({"db": str(report.db), "method": report.method, "n_files": report.n_files,
                     "seconds": report.seconds, "n_failed": report.failed,
                     "parts": [{"method": p.method, "indexed": p.done, "failed": p.failed,
-                               "unchanged": report.n_files - p.todo, "failed_before": p.failed_before,
+                               "unchanged": report.n_files - p.todo - p.failed_before, "failed_before": p.failed_before,
                                "seconds": p.seconds, "failures": list(p.failures)} for p in report.parts],
-                    "open_meshes": report.open_meshes, "multi_component_meshes": report.multi_component_meshes})
+                    "open_meshes": report.open_meshes, "multi_component_meshes": report.multi_component_meshes,
+                    "removed": report.removed})
     else:
         for part in report.parts:
             before = f", {part.failed_before} failed before (skipped; --retry-failed retries them)" \
                 if part.failed_before else ""
-            print(f"{report.db}: {part.done} indexed, {part.failed} failed, {report.n_files - part.todo} unchanged "
-                  f"(skipped){before} [{part.method}, {part.seconds:.1f} s of worker time]")
+            print(f"{report.db}: {part.done} indexed, {part.failed} failed, "
+                  f"{report.n_files - part.todo - part.failed_before} unchanged (skipped){before} "
+                  f"[{part.method}, {part.seconds:.1f} s of worker time]")
         print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
+        if report.removed:
+            print(f"{report.removed} rows of files no longer in the indexed folders were removed")
         if report.open_meshes:
             n = len(report.open_meshes)
             print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries): the spectrum, heat kernel and "

@@ -191,3 +191,19 @@ def test_an_item_identical_to_the_query_ranks_first_even_on_a_tiny_graph():
         for q in range(n):
             d = fused_query([P[q] for P in parts], parts, fusion)
             assert d[q] == 0.0 and (np.delete(d, q) > 0).all(), (seed, q)
+
+
+def test_exact_duplicates_give_finite_rankings():
+    # four identical shapes and two others: the k-th neighbour distance of a copy is 0
+    X = np.array([[0.0, 0.0]] * 4 + [[1.0, 0.0], [0.0, 2.0]])
+    D = cdist(X, X)
+    for k in (1, 3, 5):
+        R = manifold_ranking(D, k)
+        assert np.isfinite(R).all()
+    fusion = Fusion(("a", "b"), "auto", 0.9, order_weights=(1, 1), agreement_power=4.0)
+    F = fused_matrix([D, 2 * D], fusion)
+    assert np.isfinite(F).all()
+    d = fused_query([D[0], 2 * D[0]], [D, 2 * D], fusion)
+    assert np.isfinite(d).all() and (d[:4] == 0).all() and (d[4:] > 0).all()
+    zeros = np.zeros((5, 5))  # every shape identical
+    assert np.isfinite(fused_matrix([zeros, zeros], fusion)).all()
