@@ -185,15 +185,17 @@ def _ranking_graph(D: np.ndarray, k: int) -> np.ndarray:
         D[~np.isfinite(D)] = 2 * D[np.isfinite(D)].max(initial=1.0)
     np.fill_diagonal(D, 0.0)
     k = max(1, min(k, n - 1))
-    order = np.argpartition(D, k, axis=1)  # [:, k] is the k-th nearest, [:, :k + 1] the k + 1 nearest
-    # items with k or more exact duplicates have a k-th distance of 0: a floor relative to the matrix
-    # keeps s_i s_j a normal number (1e-300 squared underflowed to 0, and 0 / 0 made NaN)
-    largest = float(D.max(initial=0.0))
-    scale = np.maximum(D[np.arange(n), order[:, k]], 1e-12 * largest if largest > 0 else 1.0)
+    kth = np.partition(D, k, axis=1)[:, k]  # the k-th nearest (index 0 is the item itself)
+    scale = kth.copy()
+    # an item with k or more exact duplicates has a k-th distance of 0 (and 0 / 0 made NaN): its scale
+    # is the distance to its nearest distinct item instead, else (all items equal) 1
+    zero = ~(scale > 0)
+    if zero.any():
+        nearest = np.where(D[zero] > 0, D[zero], np.inf).min(axis=1)
+        scale[zero] = np.where(np.isfinite(nearest), nearest, 1.0)
     W = np.exp(-D ** 2 / (scale[:, None] * scale[None, :]))
-    keep = np.zeros((n, n), dtype=bool)
-    keep[np.arange(n)[:, None], order[:, : k + 1]] = True
-    W = np.where(keep, W, 0.0)
+    # the k nearest and every item tied with the k-th (identical copies are all neighbours or none)
+    W = np.where(D <= kth[:, None], W, 0.0)
     W = (W + W.T) / 2
     d = W.sum(axis=1)
     return W / np.sqrt(d[:, None] * d[None, :])
@@ -286,6 +288,8 @@ def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], f
     A[:n, :n] = fuse(mats, scales, fusion.order_weights)
     A[n, :n] = A[:n, n] = row
     score = 1.0 - manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha)[:n]  # the query's own node left out
+    if not score.max() > 0:  # the query is cut off from the graph: rank by the fused dissimilarities
+        return row
     out = 1.0 - score / score.max()  # 0 for the best database match
     # a database item identical to the query in every kept part comes first: on a small graph the
     # diffusion can score a well-connected neighbour above it

@@ -207,3 +207,7 @@ def test_exact_duplicates_give_finite_rankings():
     assert np.isfinite(d).all() and (d[:4] == 0).all() and (d[4:] > 0).all()
     zeros = np.zeros((5, 5))  # every shape identical
     assert np.isfinite(fused_matrix([zeros, zeros], fusion)).all()
+    # a query unlike four identical database shapes: finite, and the copies tie
+    D5 = np.zeros((4, 4))
+    d = fused_query([np.full(4, 2.0), np.full(4, 3.0)], [D5, D5], fusion)
+    assert np.isfinite(d).all() and np.ptp(d) == 0
