@@ -200,6 +200,7 @@ class IndexReport:
     open_meshes: list[str] = field(default_factory=list)  # meshes indexed now that have boundaries
     multi_component_meshes: list[str] = field(default_factory=list)  # ... with several components (largest kept)
     removed: int = 0  # rows of files no longer in the indexed folders, deleted
+    unmatched_labels: list[str] = field(default_factory=list)  # labels-file paths that are no mesh file given
 
     @property
     def failed(self) -> int:
@@ -283,7 +284,8 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     cleans = {path: c for path, c in shapes.items() if c is not None}
     return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0,
                        sorted(p for p, c in cleans.items() if c.after.n_boundary_loops > 0),
-                       sorted(p for p, c in cleans.items() if c.dropped_components > 0), removed)
+                       sorted(p for p, c in cleans.items() if c.dropped_components > 0), removed,
+                       sorted(set(label_of) - {str(f) for f in files}))
 
 
 def _update_shortlist(db: Path, method: str, indexed: set[str]) -> None:

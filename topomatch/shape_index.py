@@ -176,6 +176,9 @@ class ShapeIndex:
         earlier content of the same file (same path, method and params) is replaced too."""
         self._sql("DELETE FROM shapes WHERE path = ? AND method = ? AND params_hash = ? AND content_hash != ?",
                   (path, method, params_hash, content_hash))
+        if label is None:  # the file's label from another method's row (labels belong to files, not methods)
+            known = self._sql("SELECT label FROM shapes WHERE path = ? AND label IS NOT NULL LIMIT 1", (path,))
+            label = known[0][0] if known else None
         self._sql(
             "INSERT OR REPLACE INTO shapes (content_hash, path, label, method, params_hash, params, status, reason,"
             " n_endpoints, kind, descriptor, seconds, created) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",

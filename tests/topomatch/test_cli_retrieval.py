@@ -205,3 +205,16 @@ def test_shortlisted_query_ranks_as_the_exact_fusion_without_re_ranking(collecti
     exact = fused_query([M[i] for M in mats], mats, replace(get_method("topomatch").fusion, rerank_k=None))
     assert [r["path"] for r in result.results] == [rows[j].path for j in np.argsort(exact, kind="stable")]
     assert len(index.shortlist()) == 6
+
+
+def test_labels_belong_to_files_and_unmatched_label_rows_are_reported(collection, tmp_path, capsys):
+    db = tmp_path / "index.db"
+    labels = collection / "labels.csv"
+    labels.write_text(labels.read_text() + "missing.off,body\n")
+    code, out, err = run(capsys, "index", collection, "--db", db, "--method", "d2", "--labels", labels,
+                         "--workers", "1", "--no-progress")
+    assert code == 0 and "1 labelled path is no mesh file of this run" in err and "missing.off" in err
+    # a second method indexed without --labels takes the files' labels
+    code, _, _ = run(capsys, "index", collection, "--db", db, "--method", "sh", "--workers", "1", "--no-progress")
+    code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "sh", "--json", "--out", tmp_path / "S.npz")
+    assert code == 0 and json.loads(out)["n"] == len(MESHES)

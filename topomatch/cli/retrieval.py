@@ -152,7 +152,7 @@ def cmd_index(args: argparse.Namespace) -> int:
                                "unchanged": report.n_files - p.todo - p.failed_before, "failed_before": p.failed_before,
                                "seconds": p.seconds, "failures": list(p.failures)} for p in report.parts],
                     "open_meshes": report.open_meshes, "multi_component_meshes": report.multi_component_meshes,
-                    "removed": report.removed})
+                    "removed": report.removed, "unmatched_labels": report.unmatched_labels})
     else:
         for part in report.parts:
             before = f", {part.failed_before} failed before (skipped; --retry-failed retries them)" \
@@ -163,6 +163,11 @@ def cmd_index(args: argparse.Namespace) -> int:
         print(f"{report.db}: {report.method} indexed in {report.seconds:.1f} s")
         if report.removed:
             print(f"{report.removed} rows of files no longer in the indexed folders were removed")
+        if report.unmatched_labels:
+            n = len(report.unmatched_labels)
+            shown = ", ".join(report.unmatched_labels[:3]) + (", ..." if n > 3 else "")
+            print(f"{args.labels}: {n} labelled {'paths are' if n > 1 else 'path is'} no mesh file of this run "
+                  f"(misspelt, missing or not given): {shown}", file=sys.stderr)
         if report.open_meshes:
             n = len(report.open_meshes)
             print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries): the spectrum, heat kernel and "
