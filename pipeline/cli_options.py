@@ -85,8 +85,10 @@ def add_options(parser: argparse.ArgumentParser, models: Mapping[str, type[BaseM
         info, hint = field_of(models, spec.path)
         base = _strip_optional(hint)
         shown = spec.default_help if spec.default_help is not None else _default_text(info)
-        kwargs: dict[str, Any] = {"dest": spec.dest, "default": argparse.SUPPRESS,
-                                  "help": f"{info.description or ''} (default: {shown})".strip()}
+        text = info.description or ""
+        if "(default:" not in text:  # a description may say its default itself
+            text = f"{text} (default: {shown})".strip()
+        kwargs: dict[str, Any] = {"dest": spec.dest, "default": argparse.SUPPRESS, "help": text}
         if base is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         elif typing.get_origin(base) is typing.Literal:

@@ -148,14 +148,14 @@ def _face_sizes(face_lines: list[bytes], path: Path, line_offset: int) -> int:
 
 
 _HUGE_INT = re.compile(rb"(?:^|(?<=\s))-?\d{10,}(?=\s|$)", re.MULTILINE)
-_TEN_DIGITS = re.compile(rb"\d{10}")
+_DIGITS_AS_ONES = bytes.maketrans(b"0123456789", b"1111111111")
 
 
 def _check_index_width(face_block: bytes, path: Path, n_vertices: int | None) -> None:
     """Refuse a face index too wide for the readers' 32-bit integers (they wrap it silently to a
     valid-looking index); ``face_block`` holds the face lines."""
-    if not _TEN_DIGITS.search(face_block):  # the common case, found by a simpler scan
-        return
+    if face_block.translate(_DIGITS_AS_ONES).find(b"1" * 10) < 0:  # no run of 10 digits: the common case, by
+        return                                                        # two C-level passes (a regex takes 30x)
     m = _HUGE_INT.search(face_block)
     if m:
         face = face_block.count(b"\n", 0, m.start()) + 1

@@ -218,3 +218,10 @@ def test_labels_belong_to_files_and_unmatched_label_rows_are_reported(collection
     code, _, _ = run(capsys, "index", collection, "--db", db, "--method", "sh", "--workers", "1", "--no-progress")
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "sh", "--json", "--out", tmp_path / "S.npz")
     assert code == 0 and json.loads(out)["n"] == len(MESHES)
+
+
+def test_matching_options_on_a_method_without_endpoints_are_flagged(collection, tmp_path, capsys):
+    db = tmp_path / "index.db"
+    run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
+    code, _, err = run(capsys, "query", collection / "torus.off", "--db", db, "--method", "d2", "--unmatched-cost", "1")
+    assert code == 0 and "--unmatched-cost apply to skeleton-endpoint matching; d2 has no endpoint part" in err

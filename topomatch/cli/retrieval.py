@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from topomatch.cli.common import command, path_argument, print_json, verbosity
+from topomatch.cli.common import command, path_argument, print_json, verbosity, warn
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 
@@ -50,7 +50,15 @@ def _with_match_options(p: argparse.ArgumentParser) -> None:
 
 
 def _given(args: argparse.Namespace) -> dict:
-    return given_options(args, _models(), _match_options()).get("match", {})
+    """The endpoint-matching options given on the command line; a warning when ``args.method`` has no
+    endpoint part for them to act on."""
+    from topomatch.stages.retrieval.catalogue import get_method
+
+    given = given_options(args, _models(), _match_options()).get("match", {})
+    if given and not any(get_method(p).kind == "endpoints" for p in get_method(args.method).parts):
+        warn(f"{', '.join('--' + k.replace('_', '-') for k in given)} apply to skeleton-endpoint matching; "
+             f"{args.method} has no endpoint part, so they are ignored")
+    return given
 
 
 def add_parsers(sub) -> None:
