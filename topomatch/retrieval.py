@@ -245,7 +245,8 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     todo: dict[str, list] = {}  # mesh -> its part items: one work unit, the shared stages computed once
     with ShapeIndex(db_path) as store:
         folders = [Path(p).resolve() for p in paths if Path(p).is_dir()]
-        removed = store.remove_missing(folders, {str(f) for f in files}, get_method(method).parts) if folders else 0
+        present = {str(f) for f in files}
+        removed = store.remove_missing(folders, present, get_method(method).parts) if folders else 0
         for part in get_method(method).parts:
             experiment = method_experiment(part, files, workers=workers, executor=executor)
             params, phash = params_of(experiment)
@@ -285,7 +286,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0,
                        sorted(p for p, c in cleans.items() if c.after.n_boundary_loops > 0),
                        sorted(p for p, c in cleans.items() if c.dropped_components > 0), removed,
-                       sorted(set(label_of) - {str(f) for f in files}))
+                       sorted(set(label_of) - present))
 
 
 def _update_shortlist(db: Path, method: str, indexed: set[str]) -> None:

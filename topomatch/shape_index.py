@@ -58,6 +58,7 @@ CREATE TABLE IF NOT EXISTS shapes (
     UNIQUE (content_hash, method, params_hash)
 );
 CREATE INDEX IF NOT EXISTS shapes_method ON shapes (method, params_hash, status);
+CREATE INDEX IF NOT EXISTS shapes_path ON shapes (path);
 """
 
 

@@ -145,8 +145,6 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     if SV.shape[0] == V.shape[0]:  # nothing merged
         return V, F
     groups, first = np.unique(np.asarray(SVJ, dtype=np.int64), return_index=True)
-    if groups.size == V.shape[0]:
-        return V, F
     rank = np.empty(groups.size, dtype=np.int64)
     rank[np.argsort(first)] = np.arange(groups.size)
     new_index = rank[SVJ]

@@ -37,6 +37,7 @@ skeleton_command.py``).
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -136,9 +137,11 @@ class HalfEdges:
         same = sorted_key[1:] == sorted_key[:-1]
         self.pair_a, self.pair_b = self.order[:-1][same], self.order[1:][same]
 
+    @cached_property
     def consistently_oriented(self) -> bool:
         """Whether every edge shared by two faces is traversed in opposite directions by them (the
-        faces' orientations agree). Meaningful for edge-manifold meshes."""
+        faces' orientations agree). Meaningful for edge-manifold meshes. Computed once: the fan test
+        and the orientability test both ask."""
         return bool(np.all(self.forward[self.pair_a] != self.forward[self.pair_b]))
 
 
@@ -209,7 +212,7 @@ def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges |
     """
     F = np.asarray(F, dtype=np.int64)
     he = half_edges or HalfEdges(F, n_vertices)
-    if F.shape[0] and not (he.counts > 2).any() and he.consistently_oriented() and not (
+    if F.shape[0] and not (he.counts > 2).any() and he.consistently_oriented and not (
             (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).any():
         return _walk_fans(F, n_vertices, he)
     return _corner_graph_fans(F, n_vertices, he)
@@ -279,7 +282,7 @@ def _is_orientable(F: np.ndarray, half_edges: HalfEdges) -> bool:
     neighbours patch by patch, and the result is consistent (no directed edge used twice) iff the
     mesh is orientable.
     """
-    if half_edges.consistently_oriented():
+    if half_edges.consistently_oriented:
         return True
     import igl
 
