@@ -35,10 +35,9 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import InputError, Params, StageResult, stage
-from topomatch.stages.mesh.measures import bbox_diagonal
 from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.mesh.topology import TopologyReport, edge_graph_components, topology_report
+from topomatch.stages.mesh.topology import HalfEdges, TopologyReport, edge_graph_components, topology_report
 
 
 class CleanParams(Params):
@@ -118,10 +117,34 @@ def _remove_unreferenced(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.n
     return np.ascontiguousarray(NV, dtype=np.float64), np.ascontiguousarray(NF, dtype=np.int64).reshape(-1, 3)
 
 
+def _igl_merge_grid(V: np.ndarray, eps: float) -> np.ndarray:
+    """The rows ``igl.remove_duplicate_vertices`` compares, (n, 3) float64: ``round(V / eps)`` with libigl's
+    rounding (half away from zero) for ``eps > 0``, else ``V``; ``-0.0`` made ``+0.0`` (libigl compares with ``<``,
+    for which they are equal)."""
+    if eps > 0:
+        X = V / eps
+        X = np.where(X < 0, np.ceil(X - 0.5), np.floor(X + 0.5))
+    else:
+        X = np.array(V, dtype=np.float64)
+    X += 0.0
+    return X
+
+
+def _rows_distinct(X: np.ndarray) -> bool:
+    """True when no two rows of ``X`` (n, 3) float64 are equal (False may also mean a hash collision)."""
+    bits = np.ascontiguousarray(X).view(np.uint64)
+    h = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
+    h ^= (h >> np.uint64(29)) + bits[:, 1] * np.uint64(0xBF58476D1CE4E5B9)
+    h ^= (h >> np.uint64(31)) + bits[:, 2] * np.uint64(0x94D049BB133111EB)
+    h.sort()
+    return not bool(np.any(h[1:] == h[:-1]))
+
+
 def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
     """Merge vertices that ``igl.remove_duplicate_vertices`` finds equal up to ``eps``, keeping the vertex order.
 
-    libigl returns the unique vertices sorted by position; here each merged group is
+    A mesh whose grid cells (:func:`_igl_merge_grid`) are all distinct comes back at once (one sort of
+    row hashes, ~10x cheaper than libigl's row sort). Otherwise libigl returns the unique vertices sorted by position; here each merged group is
     represented by its first vertex and keeps that vertex's place, so a mesh
     without duplicates comes back unchanged.
 
@@ -141,6 +164,8 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     """
     import igl
 
+    if _rows_distinct(_igl_merge_grid(V, eps)):  # libigl would merge nothing: skip its sort
+        return V, F
     SV, _, SVJ, _ = igl.remove_duplicate_vertices(V, F, eps)
     if SV.shape[0] == V.shape[0]:  # nothing merged
         return V, F
@@ -176,25 +201,30 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     """Mask of faces (m, 3) whose vertex set equals that of an earlier face (any order or orientation)."""
     if F.shape[0] == 0:
         return np.zeros(0, dtype=bool)
-    S = np.sort(F, axis=1)
-    n = int(S[:, 2].max()) + 1
-    if n ** 3 < 2 ** 63:  # one int64 key per face: a stable sort keeps the first of equal faces first
-        key = (S[:, 0] * n + S[:, 1]) * n + S[:, 2]
-        order = np.argsort(key, kind="stable")
+    lo, hi = F.min(axis=1), F.max(axis=1)
+    mid = F.sum(axis=1) - lo - hi  # the sorted triple, without a per-row sort
+    n = int(hi.max()) + 1
+    if n ** 3 < 2 ** 63:  # one int64 key per face
+        key = (lo * n + mid) * n + hi
+        sorted_key = np.sort(key)
+        if not np.any(sorted_key[1:] == sorted_key[:-1]):  # the usual case: no duplicate, no stable sort
+            return np.zeros(F.shape[0], dtype=bool)
+        order = np.argsort(key, kind="stable")  # keeps the first of equal faces first
         sorted_key = key[order]
         dup = np.zeros(F.shape[0], dtype=bool)
         dup[order[1:][sorted_key[1:] == sorted_key[:-1]]] = True
         return dup
-    _, first = np.unique(S, axis=0, return_index=True)
+    _, first = np.unique(np.column_stack([lo, mid, hi]), axis=0, return_index=True)
     dup = np.ones(F.shape[0], dtype=bool)
     dup[first] = False
     return dup
 
 
-def _face_components(F: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
+def _face_components(F: np.ndarray, half_edges: HalfEdges) -> tuple[int, np.ndarray]:
     """(number of connected components, (m,) component of each face) of a mesh without unreferenced
-    vertices; components are numbered by their smallest vertex, as ``igl.vertex_components`` numbers them."""
-    count, labels = edge_graph_components(np.column_stack([F.ravel(), F[:, [1, 2, 0]].ravel()]), n_vertices)
+    vertices, from its half-edges; components are numbered by their smallest vertex, as
+    ``igl.vertex_components`` numbers them."""
+    count, labels = edge_graph_components(half_edges.E, int(half_edges.F.max()) + 1)
     return count, np.asarray(labels, dtype=np.int64)[F[:, 0]]
 
 
@@ -202,17 +232,20 @@ EXTENT_RANGE = (1e-50, 1e50)
 """Supported extents: squared areas (Heron's formula, ~ extent^4) stay normal double-precision numbers."""
 
 
-def _check_extent(name: str, V: np.ndarray) -> None:
-    """Refuse a mesh whose size makes squared lengths overflow or underflow (areas, cotangents)."""
+def _check_extent(name: str, V: np.ndarray) -> float:
+    """Refuse a mesh whose size makes squared lengths overflow or underflow (areas, cotangents); return the
+    diagonal of its bounding box."""
     lo, hi = EXTENT_RANGE
     with np.errstate(over="ignore", invalid="ignore"):
-        extent = float(np.max(np.abs(V.max(axis=0) - V.min(axis=0)))) if len(V) else 0.0
+        sides = V.max(axis=0) - V.min(axis=0) if len(V) else np.zeros(3)
+        extent = float(np.max(np.abs(sides)))
     if extent == 0.0:
         raise InputError(name, "all vertices are at one point")
     if not lo <= extent <= hi:
         what = "overflow" if not extent < hi else "underflow"
         raise InputError(name, f"the mesh is {extent:.3g} units across: squared lengths and areas {what} double "
                                f"precision (supported: {lo:g} to {hi:g}); rescale it, e.g. to unit size")
+    return float(np.linalg.norm(sides))
 
 
 def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
@@ -245,10 +278,10 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     if before.n_unreferenced_vertices:
         V, F = _remove_unreferenced(V, F)
     unreferenced = mesh.n_vertices - V.shape[0]
-    _check_extent(mesh.name, V)
+    diagonal = _check_extent(mesh.name, V)
 
     n_before = V.shape[0]
-    V, F = merge_duplicate_vertices(V, F, params.merge_tolerance * bbox_diagonal(V))
+    V, F = merge_duplicate_vertices(V, F, params.merge_tolerance * diagonal)
     merged = n_before - V.shape[0]
 
     n_degenerate = n_duplicate = 0
@@ -271,14 +304,16 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
         unreferenced += n_before - V.shape[0]
 
     unchanged = V is mesh.V and F is mesh.F  # nothing was repaired: the topology is the one measured
-    n_components, face_label = (before.n_components, None) if unchanged else _face_components(F, V.shape[0])
+    half_edges = None if unchanged else HalfEdges(F, V.shape[0])  # of the repaired mesh, shared with its report
+    n_components, face_label = (before.n_components, None) if unchanged else _face_components(F, half_edges)
     dropped_components = dropped_faces = dropped_vertices = 0
     if n_components > 1 and params.components == "fail":
         raise InputError(mesh.name, f"mesh has {n_components} connected components; "
                                     "pass clean.components=largest or clean.components=keep_all")
     if n_components > 1 and params.components == "largest":
         if face_label is None:
-            _, face_label = _face_components(F, V.shape[0])
+            half_edges = HalfEdges(F, V.shape[0])
+            _, face_label = _face_components(F, half_edges)
         keep = int(np.argmax(np.bincount(face_label, minlength=n_components)))
         mask = face_label == keep
         dropped_components = n_components - 1
@@ -286,9 +321,9 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
         n_before = V.shape[0]
         V, F = _remove_unreferenced(V, F[mask])
         dropped_vertices = n_before - V.shape[0]
-        unchanged = False
+        unchanged, half_edges = False, None
 
-    after = before if unchanged else topology_report(Mesh(V, F, name=mesh.name))
+    after = before if unchanged else topology_report(Mesh(V, F, name=mesh.name), half_edges)
     cleaned = Mesh(V, F, name=mesh.name, closed_manifold=after.is_closed and after.n_nonmanifold_edges == 0)
     if params.fail_on_nonmanifold and not after.is_manifold:
         raise InputError(mesh.name, f"mesh has {after.n_nonmanifold_edges} non-manifold edges and "

@@ -181,11 +181,21 @@ def _compact_faces(F: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
 
 
 def edge_graph_components(E: np.ndarray, n_vertices: int) -> tuple[int, np.ndarray]:
-    """Connected components of the graph of the edges ``E`` (k, 2) on ``n_vertices`` vertices: (count, labels)."""
-    from scipy.sparse import coo_matrix
+    """Connected components of the graph of the edges ``E`` (k, 2) on ``n_vertices`` vertices: (count, labels).
+
+    Edges sorted by their first vertex (as :class:`HalfEdges` gives them) become a CSR matrix directly;
+    others go through scipy's COO conversion (a sort).
+    """
+    from scipy.sparse import coo_matrix, csr_matrix
     from scipy.sparse.csgraph import connected_components
 
-    A = coo_matrix((np.ones(len(E), dtype=bool), (E[:, 0], E[:, 1])), shape=(n_vertices, n_vertices))
+    E = np.asarray(E, dtype=np.int64)
+    if len(E) and np.all(E[1:, 0] >= E[:-1, 0]):
+        indptr = np.zeros(n_vertices + 1, dtype=np.int64)
+        np.cumsum(np.bincount(E[:, 0], minlength=n_vertices), out=indptr[1:])
+        A = csr_matrix((np.ones(len(E)), E[:, 1], indptr), shape=(n_vertices, n_vertices))
+    else:
+        A = coo_matrix((np.ones(len(E), dtype=bool), (E[:, 0], E[:, 1])), shape=(n_vertices, n_vertices))
     count, labels = connected_components(A, directed=False)
     return int(count), labels
 
@@ -292,7 +302,7 @@ def _is_orientable(F: np.ndarray, half_edges: HalfEdges) -> bool:
     return bool(np.unique(keys).size == keys.size)
 
 
-def topology_report(mesh: Mesh) -> TopologyReport:
+def topology_report(mesh: Mesh, half_edges: HalfEdges | None = None) -> TopologyReport:
     """Count the topological invariants of ``mesh``.
 
     Parameters
@@ -300,6 +310,9 @@ def topology_report(mesh: Mesh) -> TopologyReport:
     mesh : Mesh
         ``V`` (n, 3) float64, ``F`` (m, 3) int64. Any mesh is accepted (non-manifold,
         several components, unreferenced vertices, no faces).
+    half_edges : HalfEdges, optional
+        ``HalfEdges(mesh.F, mesh.n_vertices)`` if the caller has it (used only when every vertex is
+        referenced).
 
     Returns
     -------
@@ -322,7 +335,7 @@ def topology_report(mesh: Mesh) -> TopologyReport:
             is_manifold=True, is_orientable=None,
         )
     Fc, n_ref = _compact_faces(F, n_vertices)
-    he = HalfEdges(Fc, n_ref)
+    he = half_edges if half_edges is not None and Fc is F else HalfEdges(Fc, n_ref)
     E, counts = he.E, he.counts
     n_edges = int(E.shape[0])
     boundary = counts == 1

@@ -179,7 +179,7 @@ def test_a_clean_mesh_is_passed_through_with_one_topology_report(bundled_mesh, m
     mesh = bundled_mesh("eight_genus2.off")
     calls = []
     real = clean_module.topology_report
-    monkeypatch.setattr(clean_module, "topology_report", lambda m: calls.append(m) or real(m))
+    monkeypatch.setattr(clean_module, "topology_report", lambda m, *a: calls.append(m) or real(m, *a))
     result = clean_module.clean_mesh(mesh, clean_module.CleanParams(components="largest"))
     assert result.mesh.V is mesh.V and result.mesh.F is mesh.F
     assert result.after is result.before and len(calls) == 1
@@ -193,3 +193,34 @@ def test_duplicate_faces_keep_the_first_occurrence():
     np.testing.assert_array_equal(duplicate_faces(F), [False, False, True, True, True, False])
     big = np.array([[0, 1, 2], [3_000_000, 1, 2], [2, 1, 3_000_000]])  # keys beyond int64: the row-wise path
     np.testing.assert_array_equal(duplicate_faces(big), [False, False, True])
+
+
+@pytest.mark.parametrize("eps", [0.0, 1e-3, 0.05, 0.1, 0.3])
+def test_merging_agrees_with_libigl_on_points_near_grid_cell_borders(eps):
+    """The fast no-duplicate check must see exactly the cells ``igl.remove_duplicate_vertices`` compares:
+    points on and next to half-cells (rounding half away from zero, -0.0 against 0.0) merge as libigl merges
+    them, and a mesh without duplicates comes back as the same arrays."""
+    import igl
+
+    from topomatch.stages.mesh.clean import merge_duplicate_vertices
+
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        offsets = rng.choice([0.0, 1e-12, -1e-12, 0.01, -0.01, 0.49, -0.49], size=(60, 3))
+        V = (rng.integers(-6, 6, size=(60, 3)) * 0.5 + offsets) * (eps or 1.0)
+        V[:2] = [[0.0, -0.0, 0.0], [-0.0, 0.0, -0.0]]
+        F = np.arange(60).reshape(20, 3)  # every vertex in a face: merged F is the map old -> new vertex
+        merged_V, merged_F = merge_duplicate_vertices(V, F, eps)
+        SV, _, SVJ, _ = igl.remove_duplicate_vertices(V, F, eps)
+        ours, theirs = merged_F.ravel(), np.asarray(SVJ).ravel()
+        assert merged_V.shape[0] == SV.shape[0]
+        np.testing.assert_array_equal(ours[:, None] == ours[None, :], theirs[:, None] == theirs[None, :])
+    for _ in range(300):  # one near pair among well-separated points: the fast check decides alone when it
+        V = rng.standard_normal((60, 3)) * 100 * (eps or 1.0)  # finds no duplicate cell
+        V[5] = V[7] + 0.3 * (eps or 1.0) * rng.choice([-1, 1], size=3)
+        merged_V, _ = merge_duplicate_vertices(V, F, eps)
+        assert merged_V.shape[0] == igl.remove_duplicate_vertices(V, F, eps)[0].shape[0]
+    distinct = np.random.default_rng(4).standard_normal((50, 3))
+    F = np.array([[0, 1, 2]])
+    V2, F2 = merge_duplicate_vertices(distinct, F, 1e-6)
+    assert V2 is distinct and F2 is F
