@@ -28,7 +28,10 @@ class MorseParams(Params):
     euclidean_scale: Literal["mean_squared_radius", "none"] = Field(
         "mean_squared_radius", description="divide the Euclidean term by its mean (scale invariant) or not (literal)")
     mass: Literal["full", "voronoi"] = Field("full", description="Fiedler: FEM mass matrix type")
-    sources: int = Field(256, ge=1, description="agd: number of area-sampled Dijkstra sources")
+    sources: int = Field(64, ge=1, description="agd: number of Dijkstra sources")
+    sampling: Literal["random", "farthest"] = Field(
+        "farthest", description="agd: sources drawn by area (Monte-Carlo mean) or by farthest-point sampling, each "
+                              "weighted by its geodesic Voronoi area (Hilaga 2001's base vertices)")
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,7 +58,7 @@ def morse_function(mesh: Mesh, params: MorseParams) -> MorseFunction:
     if params.function == "agd":
         from topomatch.stages.morse.agd import average_geodesic_distance
 
-        return average_geodesic_distance(mesh.V, mesh.F, sources=params.sources)
+        return average_geodesic_distance(mesh.V, mesh.F, sources=params.sources, sampling=params.sampling)
     if params.function == "geodesic":
         from topomatch.stages.morse.geodesic import geodesic_from_centroid
 
@@ -65,7 +68,7 @@ def morse_function(mesh: Mesh, params: MorseParams) -> MorseFunction:
     return fiedler_function(mesh, mass=params.mass)
 
 
-@stage("morse", params=MorseParams, version=1, consumes=("mesh",), produces=("function",))
+@stage("morse", params=MorseParams, version=2, consumes=("mesh",), produces=("function",))
 def morse(mesh: Mesh, *, params: MorseParams) -> MorseResult:
     """A Morse function on the vertices (mixture distance, Fiedler vector, height, geodesic, AGD)."""
     return MorseResult(morse_function(mesh, params))
