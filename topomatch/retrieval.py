@@ -401,11 +401,14 @@ class Collection:
 
     def part_matrices(self, method: str, descriptors: dict[str, list[Descriptor]],
                       options: dict[str, Any] | None = None) -> list[np.ndarray]:
-        """The (n, n) dissimilarity matrix of each part of ``method`` (itself for a single method)."""
-        from topomatch.stages.retrieval.ranking import dissimilarity_matrix
+        """The (n, n) dissimilarity matrix of each part of ``method`` (itself for a single method), saved in the
+        index's cache (``<db>.cache``) and read back while the part's descriptors and options are the same."""
+        from topomatch.pipeline.cache import Cache
+        from topomatch.stages.retrieval.ranking import saved_dissimilarity_matrix
 
         m = get_method(method)
-        return [dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options)) for p in m.parts]
+        cache = Cache(cache_dir(self.db))
+        return [saved_dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options), cache) for p in m.parts]
 
     def matrix(self, method: str, descriptors: dict[str, list[Descriptor]],
                options: dict[str, Any] | None = None) -> np.ndarray:

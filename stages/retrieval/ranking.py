@@ -59,3 +59,48 @@ def dissimilarity_matrix(descriptors: list[Descriptor], method: Method | str,
     if options.endpoint_window is not None:
         M[np.abs(counts[:, None] - counts[None, :]) > options.endpoint_window] = np.inf
     return M
+
+
+#: Version of the dissimilarities: bump it when a method's distance or the endpoint matching changes, so
+#: that matrices saved by :func:`saved_dissimilarity_matrix` before the change are not used.
+DISSIMILARITY_VERSION = 1
+
+#: Matrices of collections up to this size are saved (n^2 float64: 200 MB at 5,000 shapes; larger
+#: indexes rank through the shortlist, never through a full matrix).
+SAVED_MATRIX_MAX = 5000
+
+
+def matrix_key(descriptors: list[Descriptor], method: Method | str, options: MatchOptions | None = None) -> str:
+    """SHA-256 of everything :func:`dissimilarity_matrix` reads: the method, its options, the version and
+    every descriptor (kind, endpoint count, dtype, shape and bytes, in order)."""
+    import hashlib
+    import json
+
+    m = _method(method)
+    options = options or m.match_options()
+    h = hashlib.sha256(json.dumps(["dissimilarity_matrix", DISSIMILARITY_VERSION, m.name,
+                                   options.model_dump(mode="json") if m.kind == "endpoints" else None]).encode())
+    for d in descriptors:
+        data = np.ascontiguousarray(d.data)
+        h.update(f"|{d.kind}|{d.n_endpoints}|{data.dtype.str}|{data.shape}|".encode())
+        h.update(data.tobytes())
+    return h.hexdigest()
+
+
+def saved_dissimilarity_matrix(descriptors: list[Descriptor], method: Method | str, options: MatchOptions | None,
+                               cache) -> np.ndarray:
+    """:func:`dissimilarity_matrix`, read from ``cache`` (a :class:`~topomatch.pipeline.cache.Cache`, e.g. an
+    index's) when the same descriptors were compared before with the same method and options, else
+    computed and saved there. A database matrix costs n^2 comparisons (1.4 s for 400 endpoint sets), a
+    query's row n: saving it makes a repeated query cost its row only."""
+    n = len(descriptors)
+    if n > SAVED_MATRIX_MAX:
+        return dissimilarity_matrix(descriptors, method, options)
+    key = matrix_key(descriptors, method, options)
+    hit, M = cache.get(key, lambda v: None if isinstance(v, np.ndarray) and v.shape == (n, n) and v.dtype.kind == "f"
+                       else "not an (n, n) float matrix")
+    if hit:
+        return M
+    M = dissimilarity_matrix(descriptors, method, options)
+    cache.put(key, M)
+    return M
