@@ -20,6 +20,11 @@ whose own mAP on every tune collection is within 0.01 of the most expensive vari
 substitution into the default fusion keeps the fusion's mAP within 0.005 of the fusion with the
 most expensive variants on every tune collection; then the combination must pass the fusion test
 too (else the part with the largest fusion loss steps back to its next dearer variant, repeatedly).
+
+Then the number of eigenpairs of the spectrum the intrinsic parts share (:data:`SPECTRUM_KS`; the part
+ladders above are computed with the last, 60, the product's k when they were chosen) by the same rule,
+with the parts chosen above: the smallest k for which agd, hks and shapedna each keep their mAP within
+0.01 of k = 60's on every tune collection, and the fusion within 0.005. (It chose 40, now the product's.)
 """
 
 from __future__ import annotations
@@ -37,15 +42,26 @@ from topomatch.retrieval import index, open_index
 from topomatch.stages.retrieval.catalogue import METHODS, SPECTRAL_CHAIN, CLEAN_CHAIN, get_method
 from topomatch.stages.retrieval.fusion import fused_matrix
 
+#: Eigenpairs of the shared spectrum, cheapest first; the last is the one the part ladders are computed with.
+SPECTRUM_KS = (40, 60)
+INTRINSIC = ("agd", "hks", "shapedna")
+LADDER_CHAIN = SPECTRAL_CHAIN[:-1] + ({"spectrum": {"k": SPECTRUM_KS[-1]}},)
+
 #: part -> [(variant name, the stage chain's last stages)], cheapest first; the last is the dearest.
 ENDPOINT_TAIL = ("level_sets", "reeb_graph", "prune", "endpoint_hks_descriptor")
 LADDERS = {
-    "agd": [(f"agd-sources-{k}", SPECTRAL_CHAIN + ({"morse": {"function": "agd", "sources": k}},) + ENDPOINT_TAIL)
-            for k in (64, 128, 256)],
+    "agd": [(name, LADDER_CHAIN + ({"morse": {"function": "agd", "sources": k, "sampling": how}},) + ENDPOINT_TAIL)
+            for name, k, how in (("agd-farthest-32", 32, "farthest"), ("agd-farthest-64", 64, "farthest"),
+                                 ("agd-sources-256", 256, "random"))],
     "d2": [(f"d2-pairs-2e{e}", CLEAN_CHAIN + ({"d2": {"n_pairs": 1 << e}},)) for e in (16, 17, 18)],
     "sh": [(f"sh-points-2e{e}", CLEAN_CHAIN + ({"spherical_harmonics": {"n_points": 1 << e}},))
            for e in (15, 16, 17)],
 }
+
+
+def k_variant(part: str, k: int) -> str:
+    """Name of the product's ``part`` computed from ``k`` eigenpairs."""
+    return f"{part}-k{k}"
 
 
 def register_variants() -> None:
@@ -53,6 +69,12 @@ def register_variants() -> None:
     for part, ladder in LADDERS.items():
         for name, chain in ladder:
             METHODS[name] = replace(get_method(part), name=name, chain=chain)
+    assert "spectrum" in SPECTRAL_CHAIN[-1]
+    for k in SPECTRUM_KS:
+        for part in INTRINSIC:
+            method = get_method(part)
+            chain = SPECTRAL_CHAIN[:-1] + ({"spectrum": {"k": k}},) + method.chain[len(SPECTRAL_CHAIN):]
+            METHODS[k_variant(part, k)] = replace(method, name=k_variant(part, k), chain=chain)
 
 
 def matrices(db: Path, methods: list[str]) -> tuple[dict[str, np.ndarray], np.ndarray]:
@@ -81,13 +103,13 @@ def main() -> None:
     args = ap.parse_args()
     register_variants()
     variants = [name for ladder in LADDERS.values() for name, _ in ladder]
-    methods = variants + ["hks", "shapedna"]
+    methods = variants + [k_variant(p, k) for k in SPECTRUM_KS for p in INTRINSIC]
     sources = {c.name: (c, Path(f"{c}.db")) for c in args.tune + args.report}
     sources["Watertight"] = (args.watertight, args.watertight_db)
     colls = {}
     for name, (folder, db) in sources.items():
         for m in methods:
-            index([folder], db, method=m, labels=folder / "labels.csv", workers=1)
+            index([folder], db, method=m, labels=folder / "labels.csv", workers=2)
         colls[name] = matrices(db, methods)
     wt_m, wt_l = colls.pop("Watertight")
     classes = sorted(set(wt_l))
@@ -106,10 +128,12 @@ def main() -> None:
 
     res = {}
     for n, (mats, labels) in colls.items():
-        res[n] = {m: nn_map(mats[m], labels) for m in variants}
+        res[n] = {m: nn_map(mats[m], labels) for m in methods}
         for combo in itertools.product(*([name for name, _ in ladder] for ladder in LADDERS.values())):
             sel = dict(zip(LADDERS, combo))
-            parts = [mats[sel["agd"]], mats["hks"], mats["shapedna"], mats[sel["d2"]], mats[sel["sh"]]]
+            base = SPECTRUM_KS[-1]
+            parts = [mats[sel["agd"]], mats[k_variant("hks", base)], mats[k_variant("shapedna", base)],
+                     mats[sel["d2"]], mats[sel["sh"]]]
             res[n][fkey(sel)] = nn_map(fused_matrix(parts, fusion), labels)
 
     def fusion_ok(sel: dict) -> bool:
@@ -128,6 +152,22 @@ def main() -> None:
         worst = min(loss, key=loss.get)
         ladder = [name for name, _ in LADDERS[worst]]
         chosen[worst] = ladder[ladder.index(chosen[worst]) + 1]
+
+    def k_key(k: int) -> str:
+        return f"fusion[spectrum k = {k}]"
+
+    base = SPECTRUM_KS[-1]
+    for n, (mats, labels) in colls.items():
+        for k in SPECTRUM_KS:
+            parts = [mats[k_variant("agd", k)], mats[k_variant("hks", k)], mats[k_variant("shapedna", k)],
+                     mats[chosen["d2"]], mats[chosen["sh"]]]
+            res[n][k_key(k)] = nn_map(fused_matrix(parts, fusion), labels)
+    for k in SPECTRUM_KS:
+        own = all(res[n][k_variant(p, k)][1] >= res[n][k_variant(p, base)][1] - 0.01
+                  for n in tune for p in INTRINSIC)
+        if own and all(res[n][k_key(k)][1] >= res[n][k_key(base)][1] - 0.005 for n in tune):
+            chosen["spectrum k"] = k
+            break
 
     shown = tune + report
     print("| setting | " + " | ".join(f"{n}{' (tune)' if n in tune else ''}" for n in shown) + " |")

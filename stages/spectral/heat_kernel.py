@@ -8,8 +8,9 @@ does not change when an articulated shape bends.
 Scale: times are given in units of the surface area (``t = tau * A``), so ``lambda_i t`` does not
 change when the shape is scaled; each scale is then divided by its area-weighted mean over the
 surface (``h_t / (1/A) sum_x m_x h_t(x)``), which removes the ``1 / A`` of ``phi^2``, and its
-logarithm is taken. With the default 60 eigenpairs the smallest time 0.005 A still has
-``exp(-lambda_60 t) ~ exp(-60 * 4 pi * 0.005) ~ 0.02``: the truncation is harmless there.
+logarithm is taken. With the spectrum stage's default 60 eigenpairs the smallest time 0.005 A still has
+``exp(-lambda_60 t) ~ exp(-60 * 4 pi * 0.005) ~ 0.02``: the truncation is harmless there; the retrieval
+methods' 40 leave ``~ 0.08`` (chosen on tune collections for the same retrieval, docs/retrieval.md).
 
 The shape descriptor built from it (histograms, the ``hks`` stage) is in
 :mod:`topomatch.stages.retrieval.hks`; the endpoint signatures in
