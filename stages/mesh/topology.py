@@ -132,7 +132,8 @@ class HalfEdges:
         self.first = starts
         self.counts = np.diff(np.r_[starts, key.size]).astype(np.int64)
         head = self.order[starts]
-        self.E = np.stack([self.lo[head], self.hi[head]], axis=1)
+        self.E = np.empty((head.size, 2), dtype=np.int64)
+        self.E[:, 0], self.E[:, 1] = self.lo[head], self.hi[head]
         # consecutive half-edges of one edge: the faces around it, in sorted order
         same = sorted_key[1:] == sorted_key[:-1]
         self.pair_a, self.pair_b = self.order[:-1][same], self.order[1:][same]
@@ -240,7 +241,8 @@ def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges) -> np.ndarray:
     twin = np.full(m3, -1, dtype=np.int64)
     twin[he.pair_a], twin[he.pair_b] = he.pair_b, he.pair_a
     h = np.arange(m3, dtype=np.int64)
-    sigma = twin[h - h % 3 + (h + 2) % 3]  # the twin of the previous half-edge of the face, -1 on the boundary
+    previous = (np.arange(0, m3, 3, dtype=np.int64)[:, None] + np.array([2, 0, 1])).ravel()  # 3 f + (k + 2) % 3
+    sigma = twin[previous]  # the twin of the previous half-edge of the face, -1 on the boundary
     vertex = F.ravel()
     corners = np.bincount(vertex, minlength=n_vertices)
     open_start = twin < 0  # a corner no sigma step reaches: a path (open fan) starts there
