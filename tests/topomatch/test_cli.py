@@ -95,3 +95,32 @@ def test_run_then_rerun_hits_the_cache(small_config, write_config, tmp_path):
     assert first.returncode == 0, first.stderr
     second = topomatch("run", cfg, "--out", tmp_path / "runs", "--no-progress")
     assert "cache hits 16/16" in second.stdout
+
+
+_MMAPPED_BYTES = """
+import ctypes, sys
+import numpy as np
+class MallInfo2(ctypes.Structure):
+    _fields_ = [(n, ctypes.c_size_t) for n in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks",
+                                               "fsmblks", "uordblks", "fordblks", "keepcost")]
+libc = ctypes.CDLL(None)
+libc.mallinfo2.restype = MallInfo2
+if sys.argv[1] == "keep":
+    from topomatch.cli.allocator import keep_freed_memory
+    assert keep_freed_memory()
+a = np.ones(2 << 20)  # 16 MiB
+print(int(libc.mallinfo2().hblkhd >= a.nbytes))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt and mallinfo2")
+def test_the_command_serves_large_arrays_from_the_heap():
+    """After the CLI's allocator settings a 16 MiB array comes from the (reusable) heap, not from a fresh
+    mmap as by default (glibc's own count of mmapped bytes, in new processes)."""
+    import ctypes
+
+    if not hasattr(ctypes.CDLL(None), "mallinfo2"):
+        pytest.skip("glibc older than 2.33")
+    mmapped = {how: subprocess.run([sys.executable, "-c", _MMAPPED_BYTES, how], capture_output=True, text=True,
+                                   check=True).stdout.strip() for how in ("default", "keep")}
+    assert mmapped == {"default": "1", "keep": "0"}

@@ -21,6 +21,7 @@ import sys
 
 from topomatch import __version__
 from topomatch.cli import common, engine, registration, retrieval, skeleton, thesis
+from topomatch.cli.allocator import keep_freed_memory
 from topomatch.pipeline.errors import TopomatchError
 
 #: The command modules, in --help order; each has ``add_parsers(subparsers)``.
@@ -91,6 +92,8 @@ def _fail(args: argparse.Namespace, message: str, status: int, kind: str, exc: B
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv is None:  # the command (not a call from Python): large numpy temporaries reuse freed memory
+        keep_freed_memory()
     argv = sys.argv[1:] if argv is None else list(argv)
     Parser.json_errors = "--json" in argv
     args = build_parser(_command_name(argv)).parse_args(argv)
