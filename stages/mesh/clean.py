@@ -144,9 +144,9 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     """Merge vertices that ``igl.remove_duplicate_vertices`` finds equal up to ``eps``, keeping the vertex order.
 
     A mesh whose grid cells (:func:`_igl_merge_grid`) are all distinct comes back at once (one sort of
-    row hashes, ~10x cheaper than libigl's row sort). Otherwise libigl returns the unique vertices sorted by position; here each merged group is
-    represented by its first vertex and keeps that vertex's place, so a mesh
-    without duplicates comes back unchanged.
+    row hashes, ~10x cheaper than libigl's row sort). Otherwise libigl returns the unique vertices
+    sorted by position; here each merged group is represented by its first vertex and keeps that
+    vertex's place, so a mesh without duplicates comes back unchanged.
 
     Parameters
     ----------
@@ -221,11 +221,11 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     return dup
 
 
-def _face_components(F: np.ndarray, half_edges: HalfEdges) -> tuple[int, np.ndarray]:
+def _face_components(F: np.ndarray, n_vertices: int, half_edges: HalfEdges) -> tuple[int, np.ndarray]:
     """(number of connected components, (m,) component of each face) of a mesh without unreferenced
     vertices, from its half-edges; components are numbered by their smallest vertex, as
     ``igl.vertex_components`` numbers them."""
-    count, labels = edge_graph_components(half_edges.E, int(half_edges.F.max()) + 1)
+    count, labels = edge_graph_components(half_edges.E, n_vertices)
     return count, np.asarray(labels, dtype=np.int64)[F[:, 0]]
 
 
@@ -306,7 +306,8 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
 
     unchanged = V is mesh.V and F is mesh.F  # nothing was repaired: the topology is the one measured
     half_edges = None if unchanged else HalfEdges(F, V.shape[0])  # of the repaired mesh, shared with its report
-    n_components, face_label = (before.n_components, None) if unchanged else _face_components(F, half_edges)
+    n_components, face_label = ((before.n_components, None) if unchanged
+                                else _face_components(F, V.shape[0], half_edges))
     dropped_components = dropped_faces = dropped_vertices = 0
     if n_components > 1 and params.components == "fail":
         raise InputError(mesh.name, f"mesh has {n_components} connected components; "
@@ -314,7 +315,7 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     if n_components > 1 and params.components == "largest":
         if face_label is None:
             half_edges = HalfEdges(F, V.shape[0])
-            _, face_label = _face_components(F, half_edges)
+            _, face_label = _face_components(F, V.shape[0], half_edges)
         keep = int(np.argmax(np.bincount(face_label, minlength=n_components)))
         mask = face_label == keep
         dropped_components = n_components - 1
