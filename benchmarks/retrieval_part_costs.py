@@ -89,7 +89,8 @@ def matrices(db: Path, methods: list[str]) -> tuple[dict[str, np.ndarray], np.nd
             paths, labels = [p for p, _ in keep], np.array([rows[i].label for i in idx])
         if [p for p, _ in keep] != paths:
             raise SystemExit(f"{db}: method {m} has other labelled shapes than {methods[0]}")
-        out[m] = collection.part_matrices(m, {p: [ds[i] for i in idx] for p, ds in descriptors.items()})[0]
+        out[m] = collection.part_matrices(m, {p: [ds[i] for i in idx] for p, ds in descriptors.items()},
+                                         slot="labelled")[0]
     return out, labels
 
 

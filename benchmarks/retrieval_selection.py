@@ -59,7 +59,8 @@ def load(db: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
     index = open_index(db)
     rows, descriptors = index.parts(DEFAULT_METHOD)
     keep = [i for i, r in enumerate(rows) if r.label]
-    mats = index.part_matrices(DEFAULT_METHOD, {p: [ds[i] for i in keep] for p, ds in descriptors.items()})
+    mats = index.part_matrices(DEFAULT_METHOD, {p: [ds[i] for i in keep] for p, ds in descriptors.items()},
+                               slot="labelled")
     return dict(zip(method.parts, mats)), np.array([rows[i].label for i in keep])
 
 

@@ -99,5 +99,13 @@ class Cache:
             return False
         return True
 
+    def remove(self, key: str) -> None:
+        """Delete the entry of ``key`` if there is one (an entry that cannot be deleted is left)."""
+        if self.root is not None:
+            try:
+                self._path(key).unlink(missing_ok=True)
+            except OSError:
+                pass
+
     def __contains__(self, key: str) -> bool:
         return self.root is not None and self._path(key).exists()

@@ -400,15 +400,17 @@ class Collection:
         return get_method(part).match_options() if method.kind == "fusion" else _options(method, options)
 
     def part_matrices(self, method: str, descriptors: dict[str, list[Descriptor]],
-                      options: dict[str, Any] | None = None) -> list[np.ndarray]:
+                      options: dict[str, Any] | None = None, slot: str = "all") -> list[np.ndarray]:
         """The (n, n) dissimilarity matrix of each part of ``method`` (itself for a single method), saved in the
-        index's cache (``<db>.cache``) and read back while the part's descriptors and options are the same."""
+        index's cache (``<db>.cache``, one per ``slot``: ``"all"`` shapes for queries, ``"labelled"`` ones for
+        evaluation) and read back while the part's descriptors and options are the same."""
         from topomatch.pipeline.cache import Cache
         from topomatch.stages.retrieval.ranking import saved_dissimilarity_matrix
 
         m = get_method(method)
         cache = Cache(cache_dir(self.db))
-        return [saved_dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options), cache) for p in m.parts]
+        return [saved_dissimilarity_matrix(descriptors[p], p, self._part_options(p, m, options), cache, slot)
+                for p in m.parts]
 
     def matrix(self, method: str, descriptors: dict[str, list[Descriptor]],
                options: dict[str, Any] | None = None) -> np.ndarray:
@@ -540,7 +542,8 @@ class Collection:
                                       f"its class has at least {PSB_CUTOFF + 1} members)")
         t = time.perf_counter()
         m = get_method(method)
-        parts = self.part_matrices(method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, options)
+        parts = self.part_matrices(method, {p: [ds[i] for i in keep] for p, ds in descriptors.items()}, options,
+                                   slot="labelled")
         D, decision = _fused(m, parts)
         seconds = time.perf_counter() - t
         metrics = retrieval_metrics(D, labels)

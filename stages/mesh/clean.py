@@ -122,7 +122,8 @@ def _igl_merge_grid(V: np.ndarray, eps: float) -> np.ndarray:
     rounding (half away from zero) for ``eps > 0``, else ``V``; ``-0.0`` made ``+0.0`` (libigl compares with ``<``,
     for which they are equal)."""
     if eps > 0:
-        X = V / eps
+        with np.errstate(over="ignore"):
+            X = V / eps  # finite: clean_mesh uses eps = 0 when the grid would overflow
         X = np.where(X < 0, np.ceil(X - 0.5), np.floor(X + 0.5))
     else:
         X = np.array(V, dtype=np.float64)
@@ -282,7 +283,10 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     diagonal = _check_extent(mesh.name, V)
 
     n_before = V.shape[0]
-    V, F = merge_duplicate_vertices(V, F, params.merge_tolerance * diagonal)
+    eps = params.merge_tolerance * diagonal
+    if eps > 0 and not np.isfinite(float(np.abs(V).max()) / eps):  # a grid that tiny overflows: libigl would put
+        eps = 0.0                                                   # whole octants in one cell; merge exact copies
+    V, F = merge_duplicate_vertices(V, F, eps)
     merged = n_before - V.shape[0]
 
     n_degenerate = n_duplicate = 0

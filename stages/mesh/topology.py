@@ -191,6 +191,8 @@ def edge_graph_components(E: np.ndarray, n_vertices: int) -> tuple[int, np.ndarr
     from scipy.sparse.csgraph import connected_components
 
     E = np.asarray(E, dtype=np.int64)
+    if len(E) and (E.min() < 0 or E.max() >= n_vertices):  # the CSR path below would not check it
+        raise ValueError(f"edge vertex indices must lie in 0..{n_vertices - 1}, got {E.min()}..{E.max()}")
     if len(E) and np.all(E[1:, 0] >= E[:-1, 0]):
         indptr = np.zeros(n_vertices + 1, dtype=np.int64)
         np.cumsum(np.bincount(E[:, 0], minlength=n_vertices), out=indptr[1:])

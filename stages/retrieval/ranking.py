@@ -88,11 +88,18 @@ def matrix_key(descriptors: list[Descriptor], method: Method | str, options: Mat
 
 
 def saved_dissimilarity_matrix(descriptors: list[Descriptor], method: Method | str, options: MatchOptions | None,
-                               cache) -> np.ndarray:
+                               cache, slot: str) -> np.ndarray:
     """:func:`dissimilarity_matrix`, read from ``cache`` (a :class:`~topomatch.pipeline.cache.Cache`, e.g. an
     index's) when the same descriptors were compared before with the same method and options, else
     computed and saved there. A database matrix costs n^2 comparisons (1.4 s for 400 endpoint sets), a
-    query's row n: saving it makes a repeated query cost its row only."""
+    query's row n: saving it makes a repeated query cost its row only.
+
+    ``slot`` names the use (e.g. ``"all"``, ``"labelled"``): one matrix is kept per slot, method and
+    options, and a new one replaces it (the index's cache does not grow as the index changes).
+    """
+    import hashlib
+    import json
+
     n = len(descriptors)
     if n > SAVED_MATRIX_MAX:
         return dissimilarity_matrix(descriptors, method, options)
@@ -102,5 +109,12 @@ def saved_dissimilarity_matrix(descriptors: list[Descriptor], method: Method | s
     if hit:
         return M
     M = dissimilarity_matrix(descriptors, method, options)
-    cache.put(key, M)
+    m = _method(method)
+    slot_key = hashlib.sha256(json.dumps(["saved matrix slot", slot, m.name, (options or m.match_options()).model_dump(
+        mode="json") if m.kind == "endpoints" else None]).encode()).hexdigest()
+    had, previous = cache.get(slot_key, lambda v: None if isinstance(v, str) else "not a key")
+    if cache.put(key, M):
+        if had and previous != key:
+            cache.remove(previous)
+        cache.put(slot_key, key)
     return M

@@ -6,8 +6,11 @@ page-faulted and zeroed again. :func:`keep_freed_memory` fixes the threshold at 
 and keeps freed heap memory in the process (trim threshold 1 GiB, 256 MiB of padding per heap
 extension), so arrays up to 32 MiB reuse pages already touched. Measured on the mixture skeleton of a
 1.55 M-face mesh, in alternating runs of the command: stages 2.9-3.2 s without, 2.3-2.6 s with
-(docs/speed.md). The price: the process keeps up to 1 GiB it no longer uses until it exits. Only on
-glibc (``mallopt``); elsewhere nothing changes. The Python API leaves the allocator alone.
+(docs/speed.md). The price: the process keeps up to 1 GiB it no longer uses until it exits. Only the
+command's own process: pool workers (``forkserver``, a fresh interpreter) keep glibc's defaults, so
+parallel ``index`` and ``run`` are unchanged. Only on glibc (``mallopt``; any ``MALLOC_*_`` or
+``GLIBC_TUNABLES`` malloc setting of the user is overridden); elsewhere nothing changes. The Python API
+leaves the allocator alone.
 """
 
 from __future__ import annotations

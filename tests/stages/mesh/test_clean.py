@@ -224,3 +224,10 @@ def test_merging_agrees_with_libigl_on_points_near_grid_cell_borders(eps):
     F = np.array([[0, 1, 2]])
     V2, F2 = merge_duplicate_vertices(distinct, F, 1e-6)
     assert V2 is distinct and F2 is F
+
+
+def test_a_merge_tolerance_too_small_for_double_precision_merges_exact_copies_only(shapes):
+    """At 1e-310 of the diagonal, V / eps overflows and libigl's grid would put whole octants in one cell."""
+    s = shapes.icosphere(2)
+    result = clean_mesh(Mesh(s.V, s.F, name="ico"), CleanParams(merge_tolerance=1e-310))
+    assert result.merged_vertices == 0 and result.mesh.n_vertices == len(s.V)

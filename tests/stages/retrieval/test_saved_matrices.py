@@ -22,12 +22,12 @@ def test_a_saved_matrix_is_read_back_and_equals_the_computed_one(tmp_path, monke
     cache = Cache(tmp_path / "c")
     descriptors = _endpoint_sets(0)
     options = get_method("agd").match_options()
-    first = ranking.saved_dissimilarity_matrix(descriptors, "agd", options, cache)
+    first = ranking.saved_dissimilarity_matrix(descriptors, "agd", options, cache, "all")
     np.testing.assert_array_equal(first, ranking.dissimilarity_matrix(descriptors, "agd", options))
     calls = []
     real = ranking.dissimilarity_matrix
     monkeypatch.setattr(ranking, "dissimilarity_matrix", lambda *a: calls.append(a) or real(*a))
-    again = ranking.saved_dissimilarity_matrix(descriptors, "agd", options, cache)
+    again = ranking.saved_dissimilarity_matrix(descriptors, "agd", options, cache, "all")
     np.testing.assert_array_equal(again, first)
     assert calls == []  # read back, not recomputed
 
@@ -54,5 +54,20 @@ def test_an_unusable_saved_entry_is_recomputed(tmp_path):
     options = get_method("agd").match_options()
     cache.put(ranking.matrix_key(descriptors, "agd", options), np.zeros((2, 2)))  # wrong shape under the key
     with pytest.warns(CacheWarning, match="not an"):
-        M = ranking.saved_dissimilarity_matrix(descriptors, "agd", options, cache)
+        M = ranking.saved_dissimilarity_matrix(descriptors, "agd", options, cache, "all")
     np.testing.assert_array_equal(M, ranking.dissimilarity_matrix(descriptors, "agd", options))
+
+
+def test_one_matrix_is_kept_per_slot(tmp_path):
+    """A changed collection replaces its slot's saved matrix instead of adding one more file."""
+    cache = Cache(tmp_path / "c")
+    options = get_method("agd").match_options()
+    files = lambda: sorted(p.name for p in (tmp_path / "c").rglob("*") if p.is_file())  # noqa: E731
+    ranking.saved_dissimilarity_matrix(_endpoint_sets(0), "agd", options, cache, "all")
+    first = files()
+    ranking.saved_dissimilarity_matrix(_endpoint_sets(0)[:4], "agd", options, cache, "labelled")
+    assert len(files()) == len(first) + 2  # another slot: its matrix and its record
+    ranking.saved_dissimilarity_matrix(_endpoint_sets(2), "agd", options, cache, "all")
+    assert len(files()) == len(first) + 2  # the same slot: the old matrix was replaced
+    assert ranking.matrix_key(_endpoint_sets(2), "agd", options) in cache
+    assert ranking.matrix_key(_endpoint_sets(0), "agd", options) not in cache
