@@ -135,15 +135,19 @@ def test_errors(tmp_path, capsys):
     assert code == 1 and "nothing: file not found" in err
 
 
-def test_fused_topomatch_method(collection, tmp_path, capsys):
+def test_fused_topomatch_method(collection, tmp_path, capsys, monkeypatch):
     db = tmp_path / "index.db"
     code, out, _ = run(capsys, "index", collection, "--db", db, "--method", "topomatch", "--labels",
                        collection / "labels.csv", "--workers", "1", "--no-progress")
     assert code == 0
     for part in ("agd", "hks", "shapedna", "d2", "sh"):  # one index run per part of the fusion
         assert f"6 indexed, 0 failed, 0 unchanged (skipped) [{part}," in out
-    code, out, _ = run(capsys, "query", collection / "odedstein_hand_closed.obj.gz", "--db", db,
-                       "--method", "topomatch", "-k", "6", "--json")
+    from topomatch.stages.retrieval import ranking
+
+    with monkeypatch.context() as patched:  # the database's part matrices were saved by index: a query reads them
+        patched.setattr(ranking, "dissimilarity_matrix", lambda *a: pytest.fail("part matrix recomputed"))
+        code, out, _ = run(capsys, "query", collection / "odedstein_hand_closed.obj.gz", "--db", db,
+                           "--method", "topomatch", "-k", "6", "--json")
     result = json.loads(out)
     assert code == 0 and result["results"][0]["path"].endswith("odedstein_hand_closed.obj.gz")
     assert result["results"][0]["dissimilarity"] == 0.0 and len(result["results"]) == 6
