@@ -21,7 +21,8 @@ def pad_features(sets: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Stack (n_i, d) feature arrays into (len(sets), max n_i, d) with NaN padding, and the counts."""
     counts = np.array([len(s) for s in sets], dtype=np.int64)
     width = int(counts.max(initial=0))
-    dims = {s.shape[1] for s in sets if len(s)} or {3}
+    # the width of the non-empty sets; with none, of the empty (0, d) ones (a collection of shapes without endpoints)
+    dims = {s.shape[1] for s in sets if len(s)} or {s.shape[1] for s in sets if np.ndim(s) == 2} or {3}
     if len(dims) > 1:
         raise ValueError(f"endpoint feature sets of different widths: {sorted(dims)}")
     out = np.full((len(sets), max(width, 1), dims.pop()), np.nan)

@@ -200,7 +200,8 @@ def cmd_query(args: argparse.Namespace) -> int:
         print_json(result.to_dict())
     else:
         endpoints = result.n_endpoints if result.n_endpoints is not None else "-"
-        print(f"query {args.mesh} ({args.method}, {endpoints} endpoints) against {result.indexed} shapes:")
+        shapes = "1 shape" if result.indexed == 1 else f"{result.indexed} shapes"
+        print(f"query {args.mesh} ({args.method}, {endpoints} endpoints) against {shapes}:")
         for r in result.results:
             print(f"  {r['rank']:>3}. {r['dissimilarity']:.5f}  {r['label'] or '':<12} {r['path']}")
         if result.fusion is not None:

@@ -36,3 +36,12 @@ def test_chunking_does_not_change_results():
     padded, counts = pad_features(sets)
     np.testing.assert_array_equal(one_to_many(sets[3], padded, counts, chunk=7),
                                   one_to_many(sets[3], padded, counts))
+
+
+def test_a_database_of_shapes_without_endpoints_keeps_its_feature_width():
+    """Every set empty (e.g. an index of tori, whose skeletons have no endpoints): the padding keeps the sets'
+    own width, and a query without endpoints is at distance 0 from them (nothing to match, nothing unmatched)."""
+    empty = [np.zeros((0, 11)), np.zeros((0, 11))]
+    padded, counts = pad_features(empty)
+    assert padded.shape[2] == 11 and counts.tolist() == [0, 0]
+    np.testing.assert_array_equal(one_to_many(np.zeros((0, 11)), padded, counts, unmatched_cost=0.3), [0.0, 0.0])
