@@ -100,7 +100,7 @@ def isolines(V: np.ndarray, F: np.ndarray, f: np.ndarray, levels: np.ndarray,
     a, b, c = Fs[:, 0], Fs[:, 1], Fs[:, 2]
     fa, fb, fc = fs[:, 0], fs[:, 1], fs[:, 2]
     p_ac = _lerp(V[a], V[c], fa, fc, x)
-    low_side = band_index(fb, levels) >= lvl           # the level lies between a and b
+    low_side = vb[b] >= lvl                            # the level lies between a and b
     p_ab = _lerp(V[a], V[b], fa, fb, x)
     p_bc = _lerp(V[b], V[c], fb, fc, x)
     other = np.where(low_side[:, None], p_ab, p_bc)

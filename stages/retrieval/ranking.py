@@ -70,16 +70,22 @@ DISSIMILARITY_VERSION = 1
 SAVED_MATRIX_MAX = 5000
 
 
-def matrix_key(descriptors: list[Descriptor], method: Method | str, options: MatchOptions | None = None) -> str:
-    """SHA-256 of everything :func:`dissimilarity_matrix` reads: the method, its options, the version and
-    every descriptor (kind, endpoint count, dtype, shape and bytes, in order)."""
+def _comparison(method: Method | str, options: MatchOptions | None, what: str):
+    """A SHA-256 started with ``what``, the version, the method and the options it compares with (endpoint
+    methods; vector methods have none)."""
     import hashlib
     import json
 
     m = _method(method)
     options = options or m.match_options()
-    h = hashlib.sha256(json.dumps(["dissimilarity_matrix", DISSIMILARITY_VERSION, m.name,
-                                   options.model_dump(mode="json") if m.kind == "endpoints" else None]).encode())
+    return hashlib.sha256(json.dumps([what, DISSIMILARITY_VERSION, m.name,
+                                      options.model_dump(mode="json") if m.kind == "endpoints" else None]).encode())
+
+
+def matrix_key(descriptors: list[Descriptor], method: Method | str, options: MatchOptions | None = None) -> str:
+    """SHA-256 of everything :func:`dissimilarity_matrix` reads: the method, its options, the version and
+    every descriptor (kind, endpoint count, dtype, shape and bytes, in order)."""
+    h = _comparison(method, options, "dissimilarity_matrix")
     for d in descriptors:
         data = np.ascontiguousarray(d.data)
         h.update(f"|{d.kind}|{d.n_endpoints}|{data.dtype.str}|{data.shape}|".encode())
@@ -97,9 +103,6 @@ def saved_dissimilarity_matrix(descriptors: list[Descriptor], method: Method | s
     ``slot`` names the use (e.g. ``"all"``, ``"labelled"``): one matrix is kept per slot, method and
     options, and a new one replaces it (the index's cache does not grow as the index changes).
     """
-    import hashlib
-    import json
-
     n = len(descriptors)
     if n > SAVED_MATRIX_MAX:
         return dissimilarity_matrix(descriptors, method, options)
@@ -109,9 +112,7 @@ def saved_dissimilarity_matrix(descriptors: list[Descriptor], method: Method | s
     if hit:
         return M
     M = dissimilarity_matrix(descriptors, method, options)
-    m = _method(method)
-    slot_key = hashlib.sha256(json.dumps(["saved matrix slot", slot, m.name, (options or m.match_options()).model_dump(
-        mode="json") if m.kind == "endpoints" else None]).encode()).hexdigest()
+    slot_key = _comparison(method, options, f"saved matrix slot {slot}").hexdigest()
     had, previous = cache.get(slot_key, lambda v: None if isinstance(v, str) else "not a key")
     if cache.put(key, M):
         if had and previous != key:
