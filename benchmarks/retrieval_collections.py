@@ -18,7 +18,15 @@ Builds, from the shared classic and Watertight meshes, six labelled collections 
   similar_tune are: their best part reaches 0.98-1.00 mAP, so they cannot tell settings apart);
 * ``fresh_report_open`` (seed 7, 60 % open) and ``fresh_similar_report`` (seed 8, 50 % open): the
   report sources of ``strong_report_open`` and ``similar_report`` in new poses, cuts and class sizes,
-  built after those had been seen (report only).
+  built after those had been seen (report only);
+* ``hard_tune2`` (seed 10, 60 % open): ``hard_tune``'s sources in other poses, cuts and class sizes, without
+  its duplicated octopus and teddy sources (:data:`HARD_TUNE2_CLASSIC`; tune);
+  ``fresh2_report_open`` (seed 9, 60 % open) and ``fresh2_similar_report`` (seed 11, 50 % open): the
+  report sources again, built on 2026-12-02 before that day's fusion change was chosen (report only);
+* ``twins_tune`` (seed 12, 60 % open) and ``twins_report`` (seed 13, 60 % open): every tune (report) source
+  beside its :func:`twin`, a similar character in a class of its own (stretched, with two bulges), as two
+  people modelled from one template: after ``hard_tune``'s difficulty turned out to be label noise, the
+  only tune collection where no part is near perfect (2026-12-02).
 
 Each source gives a class of 3 to 20 near-isometric pose variants: ARAP (libigl ``arap``) with
 the core patch fixed and 4-6 extremity patches rotated by up to 110 degrees about the point halfway
@@ -51,6 +59,10 @@ SIMILAR_TUNE = ["human/1.off.gz", "human/5.off.gz", "human/9.off.gz", "human/14.
 #: The tune sources that no report collection shares (strong_tune's ant 81 and fourleg 381 are also
 #: similar_report sources, in other poses), with every similar tune source but human 1 (a strong_tune source).
 HARD_TUNE_CLASSIC = [s for s in TUNE if not s.startswith(("ant_", "fourleg_"))]
+#: ``hard_tune`` without its two duplicated sources: the classic octopus_watertight121 and teddy_watertight161 are
+#: byte for byte Watertight's octopus/121 and teddy/161, so ``hard_tune`` holds two pairs of classes that are one
+#: shape in different poses (their confusions are label noise, not retrieval errors).
+HARD_TUNE2_CLASSIC = [s for s in HARD_TUNE_CLASSIC if s not in ("octopus_watertight121.off", "teddy_watertight161.off")]
 SIMILAR_REPORT = ["fourleg/381.off.gz", "fourleg/385.off.gz", "fourleg/390.off.gz", "hand/181.off.gz",
                   "hand/185.off.gz", "hand/190.off.gz", "ant/81.off.gz", "../classic/odedstein_human_man.obj",
                   "../classic/odedstein_human_woman.obj"]
@@ -110,6 +122,22 @@ def cut_holes(V: np.ndarray, F: np.ndarray, rng: np.random.Generator, n_holes: i
     return V[used], remap[F]
 
 
+def twin(V: np.ndarray, F: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """A similar but different character (n, 3): the shape stretched along its principal axes (factors
+    exp(N(0, 0.03))) and given two smooth bulges (0.5-1.5 % of the diagonal, along the vertex normals,
+    Gaussian of radius 15 % of the diagonal) -- as two people modelled from one template differ."""
+    c = V.mean(axis=0)
+    _, _, axes = np.linalg.svd(V - c, full_matrices=False)
+    U = ((V - c) @ axes.T * np.exp(rng.normal(0.0, 0.03, 3))) @ axes + c
+    diag = np.linalg.norm(U.max(0) - U.min(0))
+    N = igl.per_vertex_normals(U, F.astype(np.int64))
+    for _ in range(2):
+        p = U[rng.integers(len(U))]
+        w = np.exp(-np.sum((U - p) ** 2, axis=1) / (0.15 * diag) ** 2)
+        U = U + np.nan_to_num(N) * (rng.uniform(0.005, 0.015) * diag * w)[:, None]
+    return U
+
+
 def write_off(path: Path, V: np.ndarray, F: np.ndarray) -> None:
     with open(path, "w") as fh:
         fh.write(f"OFF\n{len(V)} {len(F)} 0\n")
@@ -117,8 +145,9 @@ def write_off(path: Path, V: np.ndarray, F: np.ndarray) -> None:
         np.savetxt(fh, np.c_[np.full(len(F), 3), F], fmt="%d")
 
 
-def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float) -> int:
-    """Write the collection into ``out`` (OFF files and labels.csv); returns the number of meshes."""
+def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float, twins: bool = False) -> int:
+    """Write the collection into ``out`` (OFF files and labels.csv); returns the number of meshes.
+    ``twins``: every source also gives a second class, its :func:`twin`."""
     import fast_simplification
 
     out.mkdir(parents=True, exist_ok=True)
@@ -133,12 +162,13 @@ def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float) ->
         cls = source.name.split(".")[0].split("_watertight")[0]
         if source.parent.parent.name == "shrec07_watertight":
             cls = f"{source.parent.name}{cls}"  # human/5.off.gz -> human5
-        for i in range(int(rng.integers(3, 21))):
-            U, G = pose(V, F, rng, n_tips=int(rng.integers(4, 7)), max_angle=110.0), F
-            if rng.random() < open_fraction:
-                U, G = cut_holes(U, G, rng, int(rng.integers(1, 4)))
-            write_off(out / f"{cls}_{i:02d}.off", U, G)
-            rows.append(f"{cls}_{i:02d}.off,{cls}")
+        for name, W in [(cls, V)] + ([(f"{cls}_twin", twin(V, F, rng))] if twins else []):
+            for i in range(int(rng.integers(3, 21))):
+                U, G = pose(W, F, rng, n_tips=int(rng.integers(4, 7)), max_angle=110.0), F
+                if rng.random() < open_fraction:
+                    U, G = cut_holes(U, G, rng, int(rng.integers(1, 4)))
+                write_off(out / f"{name}_{i:02d}.off", U, G)
+                rows.append(f"{name}_{i:02d}.off,{name}")
     (out / "labels.csv").write_text("\n".join(rows) + "\n")
     return len(rows) - 1
 
@@ -152,7 +182,7 @@ def main() -> None:
     if root is None:
         raise SystemExit("set TOPOMATCH_DATA_ROOT (the classic meshes are read from it)")
     classic, watertight = root / "meshes" / "classic", root / "meshes" / "shrec07_watertight"
-    for name, sources, seed, open_fraction in (
+    for name, sources, seed, open_fraction, *twins in (
             ("strong_tune", [classic / s for s in TUNE], 1, 0.3),
             ("strong_report", [classic / s for s in REPORT], 2, 0.0),
             ("strong_report_open", [classic / s for s in REPORT], 3, 0.6),
@@ -163,10 +193,19 @@ def main() -> None:
             # fresh report collections, built after the earlier report ones had been seen (new poses,
             # cuts and class sizes of the report sources)
             ("fresh_report_open", [classic / s for s in REPORT], 7, 0.6),
-            ("fresh_similar_report", [watertight / s for s in SIMILAR_REPORT], 8, 0.5)):
+            ("fresh_similar_report", [watertight / s for s in SIMILAR_REPORT], 8, 0.5),
+            # 2026-12-02: a second hard tune collection (the tune side had one collection that could tell
+            # settings apart) and third-round report collections, built before the fusion change of that day
+            ("hard_tune2", [classic / s for s in HARD_TUNE2_CLASSIC] + [watertight / s for s in SIMILAR_TUNE[1:]], 10,
+             0.6),
+            ("fresh2_report_open", [classic / s for s in REPORT], 9, 0.6),
+            ("fresh2_similar_report", [watertight / s for s in SIMILAR_REPORT], 11, 0.5),
+            # every tune source beside its twin (a similar character): the tune side's hard case
+            ("twins_tune", [classic / s for s in TUNE], 12, 0.6, True),
+            ("twins_report", [classic / s for s in REPORT], 13, 0.6, True)):
         if args.only and name not in args.only:
             continue
-        n = build(sources, args.out / name, seed=seed, open_fraction=open_fraction)
+        n = build(sources, args.out / name, seed=seed, open_fraction=open_fraction, twins=bool(twins))
         print(f"{args.out / name}: {n} meshes", flush=True)
 
 

@@ -26,9 +26,14 @@ Then, with no labels, from the collection itself:
    scores ``F = (I - alpha S)^-1`` diffuse similarity along the graph. ``rerank_k='auto'`` ties k
    to the collection's size, ``round(sqrt(n) / 2)`` (at least 3): 5 for 100 shapes, 10 for 400,
    so small collections (and small classes) are not smoothed across classes.
-   The output is ``1 - F_ij / max F`` for a collection and ``1 - F_qj / max_j F_qj`` over the
-   database items j for one query (one linear solve; the best match gets 0). O(n^3): about
-   0.02 s for 400 shapes; for very large indexes rank without it (``rerank_k: null``).
+   With ``rerank_normalisation`` = beta > 0 the scores are divided by the items' self-scores,
+   ``G_ij = F_ij / (F_ii F_jj)^beta`` (beta = 1/2: the cosine of the two items' diffusion states, F
+   being positive definite): an item in a large, dense class has a large ``F_jj`` and otherwise
+   collects the similarity of a small neighbouring class's queries (a hub; Radovanovic et al.,
+   JMLR 2010) -- the failure seen on similar characters, a query's own small class losing its first
+   answer to a large similar one. The output is ``1 - G_ij / max G`` for a collection and
+   ``1 - G_qj / max_j G_qj`` over the database items j for one query (the best match gets 0).
+   O(n^3): about 0.02 s for 400 shapes; for very large indexes rank without it (``rerank_k: null``).
 
 Every setting was chosen by the selection protocol of docs/retrieval.md (tune collections only).
 """
@@ -66,6 +71,9 @@ class Fusion:
         A kept part's scale is multiplied by (its agreement / the best agreement) ** agreement_power:
         a part that agrees less with the others looks farther, so the order weighting counts it
         less (:func:`scale_factor`); 0 = every part at its median scale.
+    rerank_normalisation : float
+        beta >= 0: manifold-ranking scores divided by the items' self-scores to that power (module
+        docstring, step 3); 0 = Zhou et al.'s scores as they are.
     """
 
     parts: tuple[str, ...]
@@ -74,6 +82,7 @@ class Fusion:
     order_weights: tuple[float, ...] | None = None
     screen: float | None = None
     agreement_power: float = 0.0
+    rerank_normalisation: float = 0.0
 
     def with_parts(self, parts, rerank_k=...) -> "Fusion":
         """The same fusion over other parts (and optionally another ``rerank_k``)."""
@@ -201,7 +210,13 @@ def _ranking_graph(D: np.ndarray, k: int) -> np.ndarray:
     return W / np.sqrt(d[:, None] * d[None, :])
 
 
-def manifold_ranking(D: np.ndarray, k: int = 10, alpha: float = 0.9) -> np.ndarray:
+def _ranking_scores(D: np.ndarray, k: int, alpha: float) -> np.ndarray:
+    """(n, n) diffusion scores ``F = (I - alpha S)^-1`` of the graph of ``D``, symmetric (up to round-off)."""
+    F = np.linalg.inv(np.eye(len(D)) - alpha * _ranking_graph(D, k))
+    return (F + F.T) / 2
+
+
+def manifold_ranking(D: np.ndarray, k: int = 10, alpha: float = 0.9, normalisation: float = 0.0) -> np.ndarray:
     """Re-ranked (n, n) dissimilarity of a square dissimilarity matrix (module docstring).
 
     Parameters
@@ -212,31 +227,41 @@ def manifold_ranking(D: np.ndarray, k: int = 10, alpha: float = 0.9) -> np.ndarr
         Neighbours per item (clipped to n - 1).
     alpha : float
         In (0, 1): how far similarity diffuses.
+    normalisation : float
+        beta: scores divided by ``(F_ii F_jj)^beta`` (0: none).
 
     Returns
     -------
-    (n, n) float64 ``1 - F / F.max()`` in [0, 1], symmetric (``F = (I - alpha S)^-1`` is).
+    (n, n) float64 ``1 - G / G.max()`` in [0, 1], symmetric (``G = F / (f f^T)^beta``, ``f = diag F``).
     """
     n = len(D)
     if n < 3:
         return np.array(D, dtype=np.float64)
-    F = np.linalg.inv(np.eye(n) - alpha * _ranking_graph(D, k))
-    F = (F + F.T) / 2  # symmetric up to round-off
-    return 1.0 - F / F.max()
+    G = _ranking_scores(D, k, alpha)
+    if normalisation:
+        f = np.diag(G) ** -normalisation
+        G = G * f[:, None] * f[None, :]
+    return 1.0 - G / G.max()
 
 
-def manifold_ranking_row(D: np.ndarray, row: int, k: int = 10, alpha: float = 0.9) -> np.ndarray:
-    """Row ``row`` of the manifold ranking of ``D`` (n, n) by one linear solve, ``1 - F_row / max F_row``.
+def manifold_ranking_row(D: np.ndarray, row: int, k: int = 10, alpha: float = 0.9,
+                         normalisation: float = 0.0) -> np.ndarray:
+    """Row ``row`` of the manifold ranking of ``D`` (n, n), ``1 - G_row / max G_row``: one linear solve
+    without ``normalisation``, else the inverse (the self-scores of every item).
 
     Ranks exactly as :func:`manifold_ranking`'s row (same scores, another positive scale).
     """
     n = len(D)
     if n < 3:
         return np.array(D[row], dtype=np.float64)
-    e = np.zeros(n)
-    e[row] = 1.0
-    f = np.linalg.solve(np.eye(n) - alpha * _ranking_graph(D, k), e)
-    return 1.0 - f / f.max()
+    if normalisation:
+        F = _ranking_scores(D, k, alpha)
+        g = F[row] * np.diag(F) ** -normalisation
+    else:
+        e = np.zeros(n)
+        e[row] = 1.0
+        g = np.linalg.solve(np.eye(n) - alpha * _ranking_graph(D, k), e)
+    return 1.0 - g / g.max()
 
 
 def _kept(items: list, fusion: Fusion, decision: FusionDecision) -> list:
@@ -264,7 +289,7 @@ def fused_matrix(part_matrices: list[np.ndarray], fusion: Fusion, decision: Fusi
     mats = _kept(part_matrices, fusion, decision)
     D = fuse(mats, kept_scales(part_matrices, fusion, decision), fusion.order_weights)
     k = decision.rerank_k
-    return manifold_ranking(D, k, fusion.rerank_alpha) if k else D
+    return manifold_ranking(D, k, fusion.rerank_alpha, fusion.rerank_normalisation) if k else D
 
 
 def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], fusion: Fusion,
@@ -287,7 +312,8 @@ def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], f
     A = np.zeros((n + 1, n + 1))
     A[:n, :n] = fuse(mats, scales, fusion.order_weights)
     A[n, :n] = A[:n, n] = row
-    score = 1.0 - manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha)[:n]  # the query's own node left out
+    score = 1.0 - manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha,
+                                       fusion.rerank_normalisation)[:n]  # the query's own node left out
     if not score.max() > 0:  # the query is cut off from the graph: rank by the fused dissimilarities
         return row
     out = 1.0 - score / score.max()  # 0 for the best database match

@@ -238,5 +238,7 @@ def fusion_line(decision: dict, method: str) -> str:
         weights = (f"; weight (agreement / best)^{fusion.agreement_power:g}: "
                    + ", ".join(f"{p} {scale_factor(fusion, made, p):.2f}" for p in decision["kept"]))
     k = decision["rerank_k"] if decision["rerank_k"] is not None else "none"
+    normalised = (f", scores / self-scores^{fusion.rerank_normalisation:g}"
+                  if fusion.rerank_normalisation and decision["rerank_k"] is not None else "")
     return (f"fusion: kept {', '.join(decision['kept'])}{dropped}; part agreement {agreement}{weights}; "
-            f"re-ranking k = {k}")
+            f"re-ranking k = {k}{normalised}")

@@ -64,11 +64,23 @@ def test_one_row_ranks_as_the_full_ranking():
 
     X, _ = two_moons(40, seed=2)
     D = cdist(X, X)
-    R = manifold_ranking(D, k=6, alpha=0.9)
-    for i in (0, 17, 79):
-        r = manifold_ranking_row(D, i, k=6, alpha=0.9)
-        np.testing.assert_array_equal(np.argsort(r, kind="stable")[:20], np.argsort(R[i], kind="stable")[:20])
-        assert r[i] == pytest.approx(0.0)
+    for beta in (0.0, 0.5, 1.0):
+        R = manifold_ranking(D, k=6, alpha=0.9, normalisation=beta)
+        for i in (0, 17, 79):
+            r = manifold_ranking_row(D, i, k=6, alpha=0.9, normalisation=beta)
+            np.testing.assert_array_equal(np.argsort(r, kind="stable")[:20], np.argsort(R[i], kind="stable")[:20])
+            assert r[i] == pytest.approx(0.0)
+
+
+def test_half_normalised_scores_are_cosines_of_the_diffusion_states():
+    # F = (I - alpha S)^-1 is positive definite, so F_ij / sqrt(F_ii F_jj) is a cosine: at most 1, and 1 on the
+    # diagonal only (Cauchy-Schwarz); the ranking is therefore 0 on the diagonal, in [0, 1] and symmetric
+    X, _ = two_moons(30, seed=5)
+    R = manifold_ranking(cdist(X, X), k=5, alpha=0.9, normalisation=0.5)
+    np.testing.assert_allclose(np.diag(R), 0.0, atol=1e-12)
+    off = R[~np.eye(len(R), dtype=bool)]
+    assert off.min() > 0 and R.max() <= 1
+    np.testing.assert_allclose(R, R.T, atol=1e-12)
 
 
 def _scrambled(D, seed):
