@@ -253,3 +253,18 @@ def test_many_pairs_with_multiplicities(shapes):
         if level == 3:  # n = 642: the dense solver is the reference for "the 16 smallest"
             d = scipy.linalg.eigh(lap.Q.toarray(), lap.K.toarray(), eigvals_only=True, subset_by_index=[0, 15])
             np.testing.assert_allclose(v[1:], d[1:], rtol=1e-9)
+
+
+def test_arpack_with_a_lumped_mass_solves_the_generalised_problem(bundled_mesh):
+    # a diagonal mass goes to ARPACK in standard form (D^-1/2 Q D^-1/2); the pairs must be those of
+    # Q phi = lambda D phi: the dense generalised solver's values, D-orthonormal vectors, small residuals
+    import scipy.linalg
+
+    lap = laplacian(bundled_mesh(SPOT), "voronoi")
+    e = smallest_eigenpairs(lap.Q, lap.K, 12, method="arpack", fallback=False)
+    assert e.method == "arpack"
+    dense = scipy.linalg.eigh(lap.Q.toarray(), lap.K.toarray(), subset_by_index=[0, 11], eigvals_only=True)
+    np.testing.assert_allclose(e.values[1:], dense[1:], rtol=1e-9)
+    X = e.vectors
+    np.testing.assert_allclose(X.T @ (lap.K @ X), np.eye(12), atol=1e-8)
+    assert np.all(e.residuals < 1e-6)
