@@ -4,7 +4,7 @@ Usage::
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_collections.py OUT_DIR
 
-Builds, from the shared classic and Watertight meshes, six labelled collections (OFF files + ``labels.csv``):
+Builds, from the shared classic and Watertight meshes, these labelled collections (OFF files + ``labels.csv``):
 
 * ``strong_tune`` (seed 1, 30 % open): 9 source shapes (human, ant, octopus, teddy, four-legged
   animal, cat, koala, camel, scorpion) -- the split where fusion settings may be chosen;
@@ -182,7 +182,7 @@ def main() -> None:
     if root is None:
         raise SystemExit("set TOPOMATCH_DATA_ROOT (the classic meshes are read from it)")
     classic, watertight = root / "meshes" / "classic", root / "meshes" / "shrec07_watertight"
-    for name, sources, seed, open_fraction, *twins in (
+    for name, sources, seed, open_fraction, *with_twins in (
             ("strong_tune", [classic / s for s in TUNE], 1, 0.3),
             ("strong_report", [classic / s for s in REPORT], 2, 0.0),
             ("strong_report_open", [classic / s for s in REPORT], 3, 0.6),
@@ -205,7 +205,8 @@ def main() -> None:
             ("twins_report", [classic / s for s in REPORT], 13, 0.6, True)):
         if args.only and name not in args.only:
             continue
-        n = build(sources, args.out / name, seed=seed, open_fraction=open_fraction, twins=bool(twins))
+        n = build(sources, args.out / name, seed=seed, open_fraction=open_fraction,
+                  twins=bool(with_twins and with_twins[0]))
         print(f"{args.out / name}: {n} meshes", flush=True)
 
 

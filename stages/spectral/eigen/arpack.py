@@ -83,7 +83,7 @@ def solve(prob: Problem, nev: int, opts, V: np.ndarray | None, F: np.ndarray | N
         except ImportError:
             inv = ShiftInvert(prob.Q, prob.K, sigma)
         count = [0]
-        # lumped mass: no non-zero off the diagonal (the Laplacian may store K with Q's pattern)
+        # lumped mass: no non-zero off the diagonal (stored zeros off it allowed)
         rows = np.repeat(np.arange(n), np.diff(prob.K.indptr))
         diagonal = not np.any(prob.K.data[prob.K.indices != rows])
         root = np.sqrt(prob.d) if diagonal else None

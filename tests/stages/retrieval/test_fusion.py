@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.distance import cdist
 
+from topomatch.stages.retrieval.catalogue import get_method
 from topomatch.stages.retrieval.fusion import Fusion, fuse, fused_matrix, fused_query, manifold_ranking, median_scale
 
 
@@ -59,17 +60,58 @@ def test_fused_query_of_a_duplicate_ranks_it_first():
     assert fused_matrix(parts, Fusion(("a", "b"), None, 0.9)) == pytest.approx(fuse(parts, [median_scale(p) for p in parts]))
 
 
+def _uneven(seed=0):
+    """Points in classes of very different sizes and densities (3 to 20 points): (n, 4) float64."""
+    rng = np.random.default_rng(seed)
+    sizes = [3, 20, 4, 12, 3, 8]
+    centres = rng.normal(size=(len(sizes), 4)) * 2.5
+    return np.vstack([c + rng.normal(size=(s, 4)) * (0.6 if s > 10 else 1.0) for c, s in zip(centres, sizes)])
+
+
 def test_one_row_ranks_as_the_full_ranking():
     from topomatch.stages.retrieval.fusion import manifold_ranking_row
 
-    X, _ = two_moons(40, seed=2)
-    D = cdist(X, X)
+    for X in (two_moons(40, seed=2)[0], _uneven(1)):
+        D = cdist(X, X)
+        for beta in (0.0, 0.5, 1.0):
+            R = manifold_ranking(D, k=6, alpha=0.9, normalisation=beta)
+            for i in (0, 17, 39):
+                r = manifold_ranking_row(D, i, k=6, alpha=0.9, normalisation=beta)
+                # the same scores up to a positive scale (1 - r is G_i / max G_i)
+                np.testing.assert_allclose((1 - r) / (1 - r).max(), (1 - R[i]) / (1 - R[i]).max(), rtol=1e-9,
+                                           atol=1e-12)
+                assert r[i] == pytest.approx(0.0)
+
+
+def test_the_fusions_rank_with_the_normalisation_they_name():
+    # fused_matrix and fused_query re-rank by manifold ranking with the fusion's beta (module docstring),
+    # and beta changes the ranking of a collection with classes of uneven size and density
+    from topomatch.stages.retrieval.fusion import decide, kept_scales, manifold_ranking_row
+
+    X = _uneven(0)
+    parts = [cdist(X, X), cdist(X, X, "cityblock")]
+    n = len(X)
+    plain = Fusion(("a", "b"), "auto", 0.9, order_weights=(1, 1), screen=0.5, agreement_power=1.0)
+    tops = {}
     for beta in (0.0, 0.5, 1.0):
-        R = manifold_ranking(D, k=6, alpha=0.9, normalisation=beta)
-        for i in (0, 17, 79):
-            r = manifold_ranking_row(D, i, k=6, alpha=0.9, normalisation=beta)
-            np.testing.assert_array_equal(np.argsort(r, kind="stable")[:20], np.argsort(R[i], kind="stable")[:20])
-            assert r[i] == pytest.approx(0.0)
+        fusion = replace(plain, rerank_normalisation=beta)
+        decision = decide(parts, fusion)
+        D = fuse(parts, kept_scales(parts, fusion, decision), fusion.order_weights)
+        R = fused_matrix(parts, fusion)
+        np.testing.assert_allclose(R, manifold_ranking(D, decision.rerank_k, 0.9, beta), atol=1e-12)
+        tops[beta] = [tuple(np.argsort(R[i], kind="stable")[:5]) for i in range(n)]
+        # one query (a point between two classes): its row of the (n + 1)-item graph
+        q = (X[1] + X[10]) / 2
+        rows = [cdist(q[None], X)[0], cdist(q[None], X, "cityblock")[0]]
+        query_decision = decide(parts, fusion, graph_size=n + 1)
+        scales = kept_scales(parts, fusion, query_decision)
+        A = np.zeros((n + 1, n + 1))
+        A[:n, :n] = fuse(parts, scales, fusion.order_weights)
+        A[n, :n] = A[:n, n] = fuse(rows, scales, fusion.order_weights)
+        g = 1 - manifold_ranking_row(A, n, query_decision.rerank_k, 0.9, beta)[:n]
+        d = fused_query(rows, parts, fusion, query_decision)
+        np.testing.assert_allclose(d, 1 - g / g.max(), atol=1e-12)
+    assert sum(a != b for a, b in zip(tops[0.0], tops[1.0])) >= 3
 
 
 def test_half_normalised_scores_are_cosines_of_the_diffusion_states():
@@ -199,10 +241,12 @@ def test_an_item_identical_to_the_query_ranks_first_even_on_a_tiny_graph():
         n = int(r.integers(6, 14))
         X = r.random((n, 3)) * r.uniform(0.2, 1, (1, 3))
         parts = [cdist(X, X), cdist(X, X, "cityblock")]
-        fusion = Fusion(("a", "b"), "auto", 0.9, order_weights=(1, 1), agreement_power=4.0)
-        for q in range(n):
-            d = fused_query([P[q] for P in parts], parts, fusion)
-            assert d[q] == 0.0 and (np.delete(d, q) > 0).all(), (seed, q)
+        for beta in (0.0, 0.5, 1.0):
+            fusion = Fusion(("a", "b"), "auto", 0.9, order_weights=(1, 1), agreement_power=4.0,
+                            rerank_normalisation=beta)
+            for q in range(n):
+                d = fused_query([P[q] for P in parts], parts, fusion)
+                assert d[q] == 0.0 and (np.delete(d, q) > 0).all(), (seed, q, beta)
 
 
 def test_exact_duplicates_give_finite_rankings():
@@ -210,9 +254,15 @@ def test_exact_duplicates_give_finite_rankings():
     X = np.array([[0.0, 0.0]] * 4 + [[1.0, 0.0], [0.0, 2.0]])
     D = cdist(X, X)
     for k in (1, 3, 5):
-        R = manifold_ranking(D, k)
-        assert np.isfinite(R).all()
-    fusion = Fusion(("a", "b"), "auto", 0.9, order_weights=(1, 1), agreement_power=4.0)
+        for beta in (0.0, 0.5, 1.0):
+            R = manifold_ranking(D, k, normalisation=beta)
+            assert np.isfinite(R).all() and R.min() >= 0 and R.max() <= 1
+    _check_duplicates(Fusion(("a", "b"), "auto", 0.9, order_weights=(1, 1), agreement_power=4.0), D)
+    _check_duplicates(get_method("topomatch").fusion.with_parts(("a", "b")), D)
+
+
+def _check_duplicates(fusion, D):
+    """The fusion on exact duplicates: finite rankings, copies of the query first and tied."""
     F = fused_matrix([D, 2 * D], fusion)
     assert np.isfinite(F).all()
     d = fused_query([D[0], 2 * D[0]], [D, 2 * D], fusion)

@@ -255,16 +255,38 @@ def test_many_pairs_with_multiplicities(shapes):
             np.testing.assert_allclose(v[1:], d[1:], rtol=1e-9)
 
 
-def test_arpack_with_a_lumped_mass_solves_the_generalised_problem(bundled_mesh):
-    # a diagonal mass goes to ARPACK in standard form (D^-1/2 Q D^-1/2); the pairs must be those of
-    # Q phi = lambda D phi: the dense generalised solver's values, D-orthonormal vectors, small residuals
+def test_arpack_with_a_lumped_mass_solves_the_generalised_problem(bundled_mesh, monkeypatch):
+    # a diagonal mass goes to ARPACK in standard form (D^-1/2 Q D^-1/2, no mass matrix given to eigsh); the
+    # pairs must be those of Q phi = lambda D phi: the dense generalised solver's values, D-orthonormal
+    # vectors, small residuals -- also with the mass stored in Q's sparsity pattern (explicit zeros)
     import scipy.linalg
+    import scipy.sparse as sp
 
+    from topomatch.stages.spectral.eigen import arpack
+
+    masses = []
+    eigsh = arpack.sla.eigsh
+
+    def recording_eigsh(*args, **kwargs):
+        masses.append(kwargs.get("M"))
+        return eigsh(*args, **kwargs)
+
+    monkeypatch.setattr(arpack.sla, "eigsh", recording_eigsh)
     lap = laplacian(bundled_mesh(SPOT), "voronoi")
-    e = smallest_eigenpairs(lap.Q, lap.K, 12, method="arpack", fallback=False)
-    assert e.method == "arpack"
     dense = scipy.linalg.eigh(lap.Q.toarray(), lap.K.toarray(), subset_by_index=[0, 11], eigvals_only=True)
-    np.testing.assert_allclose(e.values[1:], dense[1:], rtol=1e-9)
-    X = e.vectors
-    np.testing.assert_allclose(X.T @ (lap.K @ X), np.eye(12), atol=1e-8)
-    assert np.all(e.residuals < 1e-6)
+    Q = sp.csr_matrix(lap.Q)
+    rows = np.repeat(np.arange(lap.n), np.diff(Q.indptr))
+    d = lap.K.diagonal()
+    padded = sp.csr_matrix((np.where(Q.indices == rows, d[rows], 0.0), Q.indices, Q.indptr), shape=Q.shape)
+    assert padded.nnz == Q.nnz > lap.n  # stored zeros off the diagonal
+    for K in (lap.K, padded):
+        e = smallest_eigenpairs(lap.Q, K, 12, method="arpack", fallback=False)
+        assert e.method == "arpack" and masses[-1] is None  # the standard form
+        np.testing.assert_allclose(e.values[1:], dense[1:], rtol=1e-9)
+        X = e.vectors
+        np.testing.assert_allclose(X.T @ (lap.K @ X), np.eye(12), atol=1e-8)
+        assert np.all(e.residuals < 1e-6)
+    # a full (consistent) mass keeps the generalised form
+    full = laplacian(bundled_mesh(SPOT), "full")
+    smallest_eigenpairs(full.Q, full.K, 12, method="arpack", fallback=False)
+    assert masses[-1] is not None
