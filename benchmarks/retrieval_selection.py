@@ -23,7 +23,8 @@ When the two selections differ, the default is the one of their two settings wit
 pooled over both sides' tune collections. The grid: order weights (equal ... the two smallest), screening (none, 0.5, 0.6, 0.65, 0.7),
 re-ranking k (5, 10, auto = round(sqrt(n) / 2)), agreement power (0, 1, 2, 4: each kept part's scale
 times its agreement relative to the best part's to that power), normalisation of the manifold-ranking
-scores by the items' self-scores (0, 0.5, 1; 2026-12-02). The criterion, computed on the tune side only:
+scores by the items' self-scores (0, 0.5, 1; 2026-12-02), the diffusion weight alpha (0.9, 0.95, 0.99;
+2026-12-02, fixed at 0.9 before). The criterion, computed on the tune side only:
 the worst margin over the tune collections of the fusion over its best part, in NN or in mAP, whichever
 is smaller ("never worse than its best part"; mAP alone until 2026-12-01), then the mean mAP. The chosen settings and every method's
 NN / mAP on every report collection are printed (markdown) and written as JSON.
@@ -52,6 +53,8 @@ SCREEN = {"none": None, "0.5": 0.5, "0.6": 0.6, "0.65": 0.65, "0.7": 0.7}
 POWER = {"0": 0.0, "1": 1.0, "2": 2.0, "4": 4.0}
 #: Manifold-ranking scores divided by the items' self-scores to this power (Fusion.rerank_normalisation; 2026-12-02).
 NORMALISATION = {"0": 0.0, "0.5": 0.5, "1": 1.0}
+#: Diffusion weight of manifold ranking (Fusion.rerank_alpha; fixed at 0.9 until 2026-12-02).
+ALPHA = {"0.9": 0.9, "0.95": 0.95, "0.99": 0.99}
 #: Degraded copies: part -> fraction of the shapes permuted.
 DEGRADED = {"D2, SH scrambled": {"d2": 1.0, "sh": 1.0}, "hidden-like": {"d2": 0.5, "sh": 0.5, "agd": 0.25}}
 
@@ -119,10 +122,11 @@ def main() -> None:
     best_nn = {n: max(nn_map(c[0][p], c[1])[0] for p in base.parts) for n, c in colls.items()}
 
     grid = {}
-    for (w, ow), (k, rk), (s, sc), (a, pw), (b, beta) in itertools.product(
-            ORDER_WEIGHTS.items(), RERANK.items(), SCREEN.items(), POWER.items(), NORMALISATION.items()):
-        fusion = replace(base, order_weights=ow, rerank_k=rk, screen=sc, agreement_power=pw, rerank_normalisation=beta)
-        grid[f"weights {w}; k {k}; screen {s}; agreement power {a}; normalisation {b}"] = (
+    for (w, ow), (k, rk), (s, sc), (a, pw), (b, beta), (al, alpha) in itertools.product(
+            ORDER_WEIGHTS.items(), RERANK.items(), SCREEN.items(), POWER.items(), NORMALISATION.items(), ALPHA.items()):
+        fusion = replace(base, order_weights=ow, rerank_k=rk, screen=sc, agreement_power=pw, rerank_normalisation=beta,
+                         rerank_alpha=alpha)
+        grid[f"weights {w}; k {k}; screen {s}; agreement power {a}; normalisation {b}; alpha {al}"] = (
             fusion, {n: nn_map(fused_matrix([c[0][p] for p in base.parts], fusion), c[1]) for n, c in colls.items()})
 
     def criterion(results, names):

@@ -17,7 +17,8 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
 - ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
 - ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (each part weighted by its
   agreement with the others and dropped below 0.5 of the best agreement, a pair's two smallest scaled
-  dissimilarities averaged, re-ranked by manifold ranking with scores divided by the items' self-scores);
+  dissimilarities averaged, re-ranked by manifold ranking, k from the collection's size, alpha = 0.95,
+  with the cosine of the items' diffusion states);
   ``topomatch-equal``: the first fusion (equal weights, k = 10), kept for comparison.
 
 The intrinsic methods (agd, hks, shapedna) work on a copy decimated to 6,000 faces and share its 40
@@ -124,10 +125,10 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            distance=spherical_harmonics.distance_matrix),
     Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: each part weighted by its agreement with "
            "the others (a part that agrees less looks farther; below 0.5 of the best, it is dropped), a pair's two "
-           "smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size; "
-           "scores divided by the items' self-scores)",
-           "fusion", fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.9, order_weights=(1, 1), screen=0.5,
-                                   agreement_power=1.0, rerank_normalisation=1.0)),
+           "smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size, "
+           "alpha = 0.95, the cosine of the items' diffusion states)",
+           "fusion", fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.95, order_weights=(1, 1), screen=0.5,
+                                   agreement_power=2.0, rerank_normalisation=0.5)),
     Method("topomatch-equal", "the first fusion (kept for comparison): agd, hks, shapedna, d2 and sh with equal "
            "weights, manifold ranking with k = 10", "fusion",
            fusion=Fusion(FUSION_PARTS, rerank_k=10, rerank_alpha=0.9)),

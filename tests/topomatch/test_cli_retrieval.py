@@ -151,13 +151,17 @@ def test_fused_topomatch_method(collection, tmp_path, capsys, monkeypatch):
     result = json.loads(out)
     assert code == 0 and result["results"][0]["path"].endswith("odedstein_hand_closed.obj.gz")
     assert result["results"][0]["dissimilarity"] == 0.0 and len(result["results"]) == 6
-    assert result["fusion"]["rerank_k"] == 3  # auto: round(sqrt(6 + 1) / 2), at least 3
+    from topomatch.stages.retrieval.catalogue import get_method
+    from topomatch.stages.retrieval.fusion import rerank_neighbours
+
+    default = get_method("topomatch").fusion
+    assert result["fusion"]["rerank_k"] == rerank_neighbours(default, 6 + 1)  # the query joins the graph
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch", "--json", "--out", tmp_path / "D.npz")
     D = np.load(tmp_path / "D.npz")["D"]
     assert code == 0 and D.shape == (6, 6) and np.allclose(D, D.T) and np.allclose(np.diag(D), D.min(axis=1))
     fusion = json.loads(out)["fusion"]  # what the screening did, with each part's agreement
     assert sorted(fusion["kept"] + fusion["dropped"]) == sorted(("agd", "hks", "shapedna", "d2", "sh"))
-    assert max(fusion["agreement"].values()) <= 1 and fusion["rerank_k"] == 3
+    assert max(fusion["agreement"].values()) <= 1 and fusion["rerank_k"] == rerank_neighbours(default, 6)
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch-equal", "--out", tmp_path / "E.npz")
     assert code == 0 and "fusion: kept agd, hks, shapedna, d2, sh; part agreement not measured" in out
     # a fusion needs an index: match explains and exits 2

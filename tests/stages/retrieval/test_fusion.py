@@ -272,4 +272,4 @@ def _check_duplicates(fusion, D):
     # a query unlike four identical database shapes: finite, and the copies tie
     D5 = np.zeros((4, 4))
     d = fused_query([np.full(4, 2.0), np.full(4, 3.0)], [D5, D5], fusion)
-    assert np.isfinite(d).all() and np.ptp(d) == 0
+    assert np.isfinite(d).all() and np.ptp(d) <= 1e-12  # tied up to the round-off of the inverse
