@@ -120,15 +120,15 @@ def query_command(args, mesh: str, parts: list[tuple]) -> dict[str, tuple[float,
     from topomatch.stages.retrieval.ranking import matrix_key
 
     cache = Cache(cache_dir(args.db))
-    saved = [cache._path(matrix_key(descriptors, p, options)) for descriptors, p, options in parts]
+    saved = [matrix_key(descriptors, p, options) for descriptors, p, options in parts]
     cmd = [sys.executable, "-m", "topomatch", "query", mesh, "--db", args.db, "--method", args.method, "--json"]
     out: dict[str, tuple[float, float]] = {}
     for name, forget in (("first query", True), ("repeated query", False)):
         runs = []
         for _ in range(max(1, args.repeat // 2)):
             if forget:
-                for path in saved:
-                    path.unlink(missing_ok=True)
+                for key in saved:
+                    cache.remove(key)
             t = time.perf_counter()
             done = subprocess.run(cmd, capture_output=True, text=True, check=True)
             runs.append((time.perf_counter() - t, json.loads(done.stdout)["seconds"]["ranking"]))

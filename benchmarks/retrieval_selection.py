@@ -42,7 +42,7 @@ import numpy as np
 
 from topomatch.retrieval import open_index
 from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, get_method
-from topomatch.stages.retrieval.fusion import fused_matrix
+from topomatch.stages.retrieval.fusion import agreement, decide, fused_matrix
 from topomatch.stages.retrieval.metrics import retrieval_metrics
 
 ORDER_WEIGHTS = {"equal": None, "1,1,.5,.25,.1": (1, 1, 0.5, 0.25, 0.1), "1,1,.5,.25": (1, 1, 0.5, 0.25),
@@ -117,9 +117,11 @@ def main() -> None:
                 (tune if group == "tune" else report).append(f"{name} ({what})")
     for half in ("Watertight half A", "Watertight half B"):
         colls[f"{half} (hidden-like)"] = degraded(colls[half], DEGRADED["hidden-like"])
-    best_part = {n: max(nn_map(c[0][p], c[1])[1] for p in base.parts) for n, c in colls.items()}
-
-    best_nn = {n: max(nn_map(c[0][p], c[1])[0] for p in base.parts) for n, c in colls.items()}
+    part_scores = {n: [nn_map(c[0][p], c[1]) for p in base.parts] for n, c in colls.items()}
+    best_nn = {n: max(nn for nn, _ in scores) for n, scores in part_scores.items()}
+    best_part = {n: max(ap for _, ap in scores) for n, scores in part_scores.items()}
+    part_lists = {n: [c[0][p] for p in base.parts] for n, c in colls.items()}
+    agreements = {n: agreement(mats) for n, mats in part_lists.items()}  # the same for every setting
 
     grid = {}
     for (w, ow), (k, rk), (s, sc), (a, pw), (b, beta), (al, alpha) in itertools.product(
@@ -127,7 +129,8 @@ def main() -> None:
         fusion = replace(base, order_weights=ow, rerank_k=rk, screen=sc, agreement_power=pw, rerank_normalisation=beta,
                          rerank_alpha=alpha)
         grid[f"weights {w}; k {k}; screen {s}; agreement power {a}; normalisation {b}; alpha {al}"] = (
-            fusion, {n: nn_map(fused_matrix([c[0][p] for p in base.parts], fusion), c[1]) for n, c in colls.items()})
+            fusion, {n: nn_map(fused_matrix(part_lists[n], fusion, decide(part_lists[n], fusion, agreements=agreements[n])),
+                               c[1]) for n, c in colls.items()})
 
     def criterion(results, names):
         # the worst margin over the best part, in NN or mAP, then the mean mAP

@@ -35,7 +35,7 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import InputError, Params, StageResult, stage
-from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
+from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths, min_max3
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.mesh.topology import HalfEdges, TopologyReport, edge_graph_components, topology_report
 
@@ -122,8 +122,7 @@ def _igl_merge_grid(V: np.ndarray, eps: float) -> np.ndarray:
     rounding (half away from zero) for ``eps > 0``, else ``V``; ``-0.0`` made ``+0.0`` (libigl compares with ``<``,
     for which they are equal)."""
     if eps > 0:
-        with np.errstate(over="ignore"):
-            X = V / eps  # finite: clean_mesh uses eps = 0 when the grid would overflow
+        X = V / eps  # finite: merge_duplicate_vertices uses eps = 0 when the grid would overflow
         X = np.where(X < 0, np.ceil(X - 0.5), np.floor(X + 0.5))
     else:
         X = np.array(V, dtype=np.float64)
@@ -154,7 +153,8 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     V : (n, 3) float64
     F : (m, 3) int64
     eps : float
-        Absolute grid spacing of libigl's snapping (0: exact duplicates only).
+        Absolute grid spacing of libigl's snapping (0: exact duplicates only). A spacing so small that
+        ``V / eps`` overflows merges exact duplicates only (libigl would put whole octants in one cell).
 
     Returns
     -------
@@ -165,6 +165,8 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     """
     import igl
 
+    if eps > 0 and V.size and not np.isfinite(float(np.abs(V).max()) / eps):
+        eps = 0.0
     if _rows_distinct(_igl_merge_grid(V, eps)):  # libigl would merge nothing: skip its sort
         return V, F
     SV, _, SVJ, _ = igl.remove_duplicate_vertices(V, F, eps)
@@ -202,8 +204,8 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     """Mask of faces (m, 3) whose vertex set equals that of an earlier face (any order or orientation)."""
     if F.shape[0] == 0:
         return np.zeros(0, dtype=bool)
-    a, b, c = F[:, 0], F[:, 1], F[:, 2]  # column by column: numpy's axis-1 reductions of (m, 3) are ~5x slower
-    lo, hi = np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+    a, b, c = F[:, 0], F[:, 1], F[:, 2]
+    lo, hi = min_max3(a, b, c)
     mid = a + b + c - lo - hi  # the sorted triple, without a per-row sort
     n = int(hi.max()) + 1
     if n ** 3 < 2 ** 63:  # one int64 key per face
@@ -283,10 +285,7 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     diagonal = _check_extent(mesh.name, V)
 
     n_before = V.shape[0]
-    eps = params.merge_tolerance * diagonal
-    if eps > 0 and not np.isfinite(float(np.abs(V).max()) / eps):  # a grid that tiny overflows: libigl would put
-        eps = 0.0                                                   # whole octants in one cell; merge exact copies
-    V, F = merge_duplicate_vertices(V, F, eps)
+    V, F = merge_duplicate_vertices(V, F, params.merge_tolerance * diagonal)
     merged = n_before - V.shape[0]
 
     n_degenerate = n_duplicate = 0

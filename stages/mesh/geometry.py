@@ -5,6 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 
+def min_max3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Element-wise smallest and largest of three arrays, e.g. the columns of an (m, 3) array: numpy's
+    ``min``/``max`` along a short axis 1 are ~5x slower than these pairwise ufuncs."""
+    return np.minimum(np.minimum(a, b), c), np.maximum(np.maximum(a, b), c)
+
+
 def double_areas_and_sq_lengths(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Squared edge lengths (m, 3) (column k: edge opposite corner k) and double areas (m,).
 
@@ -18,8 +24,7 @@ def double_areas_and_sq_lengths(V: np.ndarray, F: np.ndarray) -> tuple[np.ndarra
         e = X[:, i] - X[:, j]
         s[k] = e[0] * e[0] + e[1] * e[1] + e[2] * e[2]
     l0, l1, l2 = np.sqrt(s)
-    a = np.maximum(np.maximum(l0, l1), l2)
-    c = np.minimum(np.minimum(l0, l1), l2)
+    c, a = min_max3(l0, l1, l2)
     b = (l0 + l1 + l2) - a - c
     radicand = (a + (b + c)) * (c - (a - b)) * (c + (a - b)) * (a + (b - c))
     dbl = 0.5 * np.sqrt(np.maximum(radicand, 0.0))

@@ -43,6 +43,7 @@ from scipy.sparse.csgraph import connected_components
 
 from topomatch.pipeline.contract import Params, StageResult, stage
 
+from topomatch.stages.mesh.geometry import min_max3
 from topomatch.stages.reeb.band_geometry import below
 from topomatch.stages.reeb.level_sets import band_index
 
@@ -211,8 +212,7 @@ def _partition(F: np.ndarray, f: np.ndarray, levels: np.ndarray, closed: bool) -
     n_bands = len(levels) - 1
     vb = band_index(f, levels)
     t0, t1, t2 = vb[F.T]
-    b0 = np.minimum(np.minimum(t0, t1), t2)
-    b2 = np.maximum(np.maximum(t0, t1), t2)
+    b0, b2 = min_max3(t0, t1, t2)
     # extra pieces: bands strictly between the sorted vertex bands of a triangle (spanning 3+ bands)
     wide = np.flatnonzero(b2 - b0 >= 2)
     b1 = t0[wide] + t1[wide] + t2[wide] - b0[wide] - b2[wide]  # the middle band

@@ -174,12 +174,15 @@ def rerank_neighbours(fusion: Fusion, n: int) -> int | None:
     return fusion.rerank_k
 
 
-def decide(part_matrices: list[np.ndarray], fusion: Fusion, graph_size: int | None = None) -> FusionDecision:
-    """Screen the parts of ``fusion`` on a database's (n, n) part matrices (module docstring, step 1)."""
+def decide(part_matrices: list[np.ndarray], fusion: Fusion, graph_size: int | None = None,
+           agreements: np.ndarray | None = None) -> FusionDecision:
+    """Screen the parts of ``fusion`` on a database's (n, n) part matrices (module docstring, step 1).
+    ``agreements``: :func:`agreement` of these matrices when already computed (it depends on them only, so
+    many fusions of one collection can share it)."""
     n = graph_size if graph_size is not None else len(part_matrices[0])
     if fusion.screen is None and not fusion.agreement_power:
         return FusionDecision(fusion.parts, (), {}, rerank_neighbours(fusion, n))
-    a = agreement(part_matrices)
+    a = agreement(part_matrices) if agreements is None else np.asarray(agreements)
     keep = a >= (fusion.screen or 0.0) * a.max()
     return FusionDecision(tuple(p for p, k in zip(fusion.parts, keep) if k),
                           tuple(p for p, k in zip(fusion.parts, keep) if not k),
