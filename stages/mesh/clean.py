@@ -37,7 +37,7 @@ from pydantic import Field
 from topomatch.pipeline.contract import InputError, Params, StageResult, stage
 from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths, min_max3
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.mesh.topology import HalfEdges, TopologyReport, edge_graph_components, topology_report
+from topomatch.stages.mesh.topology import HalfEdges, TopologyReport, topology_report
 
 
 class CleanParams(Params):
@@ -130,23 +130,23 @@ def _igl_merge_grid(V: np.ndarray, eps: float) -> np.ndarray:
     return X
 
 
-def _rows_distinct(X: np.ndarray) -> bool:
-    """True when no two rows of ``X`` (n, 3) float64 are equal (False may also mean a hash collision)."""
+def _row_hashes(X: np.ndarray) -> np.ndarray:
+    """(n,) uint64 hash of each row of ``X`` (n, 3) float64: equal rows have equal hashes."""
     bits = np.ascontiguousarray(X).view(np.uint64)
     h = bits[:, 0] * np.uint64(0x9E3779B97F4A7C15)
     h ^= (h >> np.uint64(29)) + bits[:, 1] * np.uint64(0xBF58476D1CE4E5B9)
     h ^= (h >> np.uint64(31)) + bits[:, 2] * np.uint64(0x94D049BB133111EB)
-    h.sort()
-    return not bool(np.any(h[1:] == h[:-1]))
+    return h
 
 
 def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
     """Merge vertices that ``igl.remove_duplicate_vertices`` finds equal up to ``eps``, keeping the vertex order.
 
-    A mesh whose grid cells (:func:`_igl_merge_grid`) are all distinct comes back at once (one sort of
-    row hashes, ~10x cheaper than libigl's row sort). Otherwise libigl returns the unique vertices
-    sorted by position; here each merged group is represented by its first vertex and keeps that
-    vertex's place, so a mesh without duplicates comes back unchanged.
+    libigl snaps each vertex to its grid cell (:func:`_igl_merge_grid`) and merges equal cells; only
+    vertices whose cell's hash another vertex shares can merge, so libigl runs on those alone (a mesh
+    whose cells are all distinct comes back at once, after one sort of the hashes). Each merged group is
+    represented by its first vertex, which keeps its place, so a mesh without duplicates comes back
+    unchanged.
 
     Parameters
     ----------
@@ -165,18 +165,30 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     """
     import igl
 
-    if eps > 0 and V.size and not np.isfinite(float(np.abs(V).max()) / eps):
-        eps = 0.0
-    if _rows_distinct(_igl_merge_grid(V, eps)):  # libigl would merge nothing: skip its sort
+    with np.errstate(over="ignore"):
+        if eps > 0 and V.size and not np.isfinite(float(np.abs(V).max()) / eps):
+            eps = 0.0
+    h = _row_hashes(_igl_merge_grid(V, eps))
+    sorted_h = np.sort(h)
+    shared = np.unique(sorted_h[1:][sorted_h[1:] == sorted_h[:-1]])
+    if not shared.size:  # libigl would merge nothing
         return V, F
-    SV, _, SVJ, _ = igl.remove_duplicate_vertices(V, F, eps)
-    if SV.shape[0] == V.shape[0]:  # nothing merged
+    candidates = np.flatnonzero(shared[np.minimum(np.searchsorted(shared, h), shared.size - 1)] == h)
+    _, _, group = igl.remove_duplicate_vertices(np.ascontiguousarray(V[candidates]), eps)
+    first = np.full(int(group.max()) + 1, V.shape[0], dtype=np.int64)
+    np.minimum.at(first, group, candidates)  # the first vertex of each merged group
+    representative = np.arange(V.shape[0], dtype=np.int64)
+    representative[candidates] = first[group]
+    keep = representative == np.arange(V.shape[0])
+    if keep.all():  # nothing merged (equal hashes of distinct cells)
         return V, F
-    groups, first = np.unique(np.asarray(SVJ, dtype=np.int64), return_index=True)
-    rank = np.empty(groups.size, dtype=np.int64)
-    rank[np.argsort(first)] = np.arange(groups.size)
-    new_index = rank[SVJ]
-    return np.ascontiguousarray(V[np.sort(first)]), np.ascontiguousarray(new_index[F])
+    new_index = np.cumsum(keep) - 1
+    return np.ascontiguousarray(V[keep]), np.ascontiguousarray(new_index[representative][F])
+
+
+#: A face whose cross-product double area exceeds this times its longest squared edge has a positive
+#: Heron area for certain (see :func:`degenerate_faces`); only the others are measured with Heron.
+CERTAINLY_NOT_DEGENERATE = 1e-6
 
 
 def degenerate_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
@@ -193,11 +205,29 @@ def degenerate_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
         True for faces with a repeated vertex index or a zero area, computed with the
         stable Heron formula the Laplacian uses (:func:`topomatch.stages.mesh.geometry.double_areas_and_sq_lengths`),
         so that every face the Laplacian would reject as degenerate is dropped here.
+
+    Notes
+    -----
+    Heron's formula is measured only on the faces libigl's cross-product areas (``igl.doublearea``,
+    ``igl.squared_edge_lengths``: ~5x cheaper) cannot clear: a face with double area ``D >= t a^2``
+    (``a`` its longest edge, ``t`` = :data:`CERTAINLY_NOT_DEGENERATE`) has, with sides a >= b >= c,
+    ``b + c - a >= D^2 / (3 a^3) >= t^2 a / 3``, some 10^4 times the rounding error of the computed
+    lengths (~12 eps a), so the radicand is positive; faces with ``a`` below 1e-50 are measured too
+    (the radicand could underflow). The mask equals Heron's on every face (tests).
     """
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     if F.shape[0] == 0:
         return repeated
-    return repeated | ~(double_areas_and_sq_lengths(V, F)[1] > 0)
+    import igl
+
+    double_area = np.asarray(igl.doublearea(V, F)).ravel()
+    sq = np.asarray(igl.squared_edge_lengths(V, F))
+    longest = min_max3(sq[:, 0], sq[:, 1], sq[:, 2])[1]
+    unsure = np.flatnonzero(~((double_area > CERTAINLY_NOT_DEGENERATE * longest) & (longest > 1e-100)) & ~repeated)
+    bad = repeated
+    if unsure.size:
+        bad[unsure] = ~(double_areas_and_sq_lengths(V, F[unsure])[1] > 0)
+    return bad
 
 
 def duplicate_faces(F: np.ndarray) -> np.ndarray:
@@ -211,12 +241,15 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     if n ** 3 < 2 ** 63:  # one int64 key per face
         key = (lo * n + mid) * n + hi
         sorted_key = np.sort(key)
-        if not np.any(sorted_key[1:] == sorted_key[:-1]):  # the usual case: no duplicate, no stable sort
-            return np.zeros(F.shape[0], dtype=bool)
-        order = np.argsort(key, kind="stable")  # keeps the first of equal faces first
-        sorted_key = key[order]
+        repeated = sorted_key[1:][sorted_key[1:] == sorted_key[:-1]]
         dup = np.zeros(F.shape[0], dtype=bool)
-        dup[order[1:][sorted_key[1:] == sorted_key[:-1]]] = True
+        if not repeated.size:  # the usual case
+            return dup
+        repeated = np.unique(repeated)
+        at = np.minimum(np.searchsorted(repeated, key), repeated.size - 1)
+        shared = np.flatnonzero(repeated[at] == key)  # the faces whose key another face has
+        order = shared[np.argsort(key[shared], kind="stable")]  # the first of equal faces first
+        dup[order[1:][key[order][1:] == key[order][:-1]]] = True
         return dup
     _, first = np.unique(np.column_stack([lo, mid, hi]), axis=0, return_index=True)
     dup = np.ones(F.shape[0], dtype=bool)
@@ -228,7 +261,7 @@ def _face_components(F: np.ndarray, n_vertices: int, half_edges: HalfEdges) -> t
     """(number of connected components, (m,) component of each face) of a mesh without unreferenced
     vertices, from its half-edges; components are numbered by their smallest vertex, as
     ``igl.vertex_components`` numbers them."""
-    count, labels = edge_graph_components(half_edges.E, n_vertices)
+    count, labels = half_edges.components
     return count, np.asarray(labels, dtype=np.int64)[F[:, 0]]
 
 

@@ -115,35 +115,53 @@ class HalfEdges:
     """The 3m half-edges of the triangles ``F`` (m, 3), sorted by their undirected edge, once.
 
     Half-edge ``3 f + k`` runs from corner ``k`` of face ``f`` to corner ``k + 1``. Attributes:
-    ``lo``, ``hi`` (3m,) the edge's smaller and larger vertex; ``order`` the half-edges sorted by
-    edge; ``first`` (e,) the start of each edge's run in ``order``; ``counts`` (e,) incident faces
-    per edge; ``E`` (e, 2) the unique edges, sorted lexicographically.
+    ``forward`` (3m,) whether it runs from the edge's smaller vertex to its larger one; ``counts``
+    (e,) incident faces per edge; ``E`` (e, 2) the unique edges, sorted lexicographically;
+    ``pair_a``, ``pair_b`` consecutive half-edges of one edge in the sorted order (the two faces of an
+    interior edge of a manifold). A mesh whose every edge has exactly two half-edges (closed and
+    edge-manifold, the usual input) skips the run-length pass: its runs are the sorted pairs.
     """
 
     def __init__(self, F: np.ndarray, n_vertices: int):
         F = np.asarray(F, dtype=np.int64)
-        self.F = F
+        self.F, self.n_vertices = F, n_vertices
         u, w = F.ravel(), F[:, [1, 2, 0]].ravel()
         self.forward = u < w  # the half-edge runs from lo to hi
-        self.lo, self.hi = np.minimum(u, w), np.maximum(u, w)
-        key = self.lo * max(n_vertices, 1) + self.hi
-        self.order, sorted_key = _argsort_with_keys(key, max(n_vertices, 1) ** 2)
-        starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
-        self.first = starts
-        self.counts = np.diff(np.r_[starts, key.size]).astype(np.int64)
-        head = self.order[starts]
-        self.E = np.empty((head.size, 2), dtype=np.int64)
-        self.E[:, 0], self.E[:, 1] = self.lo[head], self.hi[head]
-        # consecutive half-edges of one edge: the faces around it, in sorted order
-        same = sorted_key[1:] == sorted_key[:-1]
-        self.pair_a, self.pair_b = self.order[:-1][same], self.order[1:][same]
+        bits = max(int(max(n_vertices, 1) - 1).bit_length(), 1)
+        key = (np.minimum(u, w) << bits) | np.maximum(u, w)  # E follows from a key by two bit operations
+        order, sorted_key = _argsort_with_keys(key, 1 << (2 * bits))
+        if key.size % 2 == 0 and np.array_equal(sorted_key[0::2], sorted_key[1::2]) and not np.any(
+                sorted_key[2::2] == sorted_key[1:-1:2]):  # every edge twice: closed, edge-manifold
+            heads = sorted_key[0::2]
+            self.counts = np.full(heads.size, 2, dtype=np.int64)
+            self.pair_a, self.pair_b = order[0::2], order[1::2]
+        else:
+            starts = np.flatnonzero(np.r_[True, sorted_key[1:] != sorted_key[:-1]])
+            heads = sorted_key[starts]
+            self.counts = np.diff(np.r_[starts, key.size]).astype(np.int64)
+            # consecutive half-edges of one edge: the faces around it, in sorted order
+            same = sorted_key[1:] == sorted_key[:-1]
+            self.pair_a, self.pair_b = order[:-1][same], order[1:][same]
+        self.E = np.empty((heads.size, 2), dtype=np.int64)
+        self.E[:, 0], self.E[:, 1] = heads >> bits, heads & ((1 << bits) - 1)
 
     @cached_property
+    def disagreeing(self) -> np.ndarray:
+        """(len(pair_a),) bool: the two faces of the pair traverse their edge in the same direction (their
+        orientations disagree). Computed once: the fan test and the orientability test both ask."""
+        return self.forward[self.pair_a] == self.forward[self.pair_b]
+
+    @property
     def consistently_oriented(self) -> bool:
         """Whether every edge shared by two faces is traversed in opposite directions by them (the
-        faces' orientations agree). Meaningful for edge-manifold meshes. Computed once: the fan test
-        and the orientability test both ask."""
-        return bool(np.all(self.forward[self.pair_a] != self.forward[self.pair_b]))
+        faces' orientations agree). Meaningful for edge-manifold meshes."""
+        return not self.disagreeing.any()
+
+    @cached_property
+    def components(self) -> tuple[int, np.ndarray]:
+        """(count, (n_vertices,) labels) of the connected components of the edge graph
+        (:func:`edge_graph_components` of ``E``); computed once for the report and ``clean``."""
+        return edge_graph_components(self.E, self.n_vertices)
 
 
 def edge_incidence(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -203,12 +221,12 @@ def edge_graph_components(E: np.ndarray, n_vertices: int) -> tuple[int, np.ndarr
     return int(count), labels
 
 
-def _count_boundary_loops(E_boundary: np.ndarray, n_vertices: int) -> int:
-    """Connected components of the graph formed by the boundary edges (k, 2)."""
+def _count_boundary_loops(E_boundary: np.ndarray) -> int:
+    """Connected components of the graph formed by the boundary edges (k, 2) (on their own vertices only)."""
     if len(E_boundary) == 0:
         return 0
-    _, labels = edge_graph_components(E_boundary, n_vertices)
-    return int(np.unique(labels[np.unique(E_boundary)]).size)
+    vertices, local = np.unique(E_boundary, return_inverse=True)
+    return edge_graph_components(local.reshape(-1, 2), len(vertices))[0]
 
 
 def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges | None = None) -> np.ndarray:
@@ -220,51 +238,71 @@ def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges |
     shared edge, and a vertex's fans are the connected components among its corners.
     ``half_edges``: the sorted half-edges of ``F``, if already computed.
 
-    A consistently oriented edge-manifold mesh (the usual input) takes :func:`_walk_fans`, a walk
-    around every vertex at once; other meshes the connected components of the corner graph.
+    Vertices whose edges are all manifold (two faces at most) and consistently oriented, and whose
+    faces repeat no index -- every vertex of the usual input -- take :func:`_walk_fans`, a walk
+    around every vertex at once; the others (a few on a broken mesh) the connected components of the
+    corner graph of the faces around them.
     """
     F = np.asarray(F, dtype=np.int64)
     he = half_edges or HalfEdges(F, n_vertices)
-    if F.shape[0] and not (he.counts > 2).any() and he.consistently_oriented and not (
-            (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])).any():
-        return _walk_fans(F, n_vertices, he)
-    return _corner_graph_fans(F, n_vertices, he)
+    if not F.shape[0]:
+        return np.zeros(n_vertices, dtype=bool)
+    hard = np.zeros(n_vertices, dtype=bool)  # vertices the walk cannot go around
+    hard[he.E[he.counts > 2].ravel()] = True
+    disagree = he.pair_a[he.disagreeing]  # a half-edge of each edge whose two faces disagree in orientation
+    hard[F.ravel()[disagree]] = True  # its start ...
+    hard[F[:, [1, 2, 0]].ravel()[disagree]] = True  # ... and its end
+    hard[F[(F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])].ravel()] = True
+    bad = _walk_fans(F, n_vertices, he, ~hard)
+    if hard.any():
+        around = np.flatnonzero(hard[F[:, 0]] | hard[F[:, 1]] | hard[F[:, 2]])  # every face at a hard vertex
+        bad[hard] = _corner_graph_fans(F[around], n_vertices, HalfEdges(F[around], n_vertices))[hard]
+    return bad
 
 
-def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges) -> np.ndarray:
-    """:func:`nonmanifold_vertices` of a consistently oriented edge-manifold mesh without repeated
-    indices, in O(m): the corners of a vertex are ordered around it by ``sigma`` (half-edge ``h``
+def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges, walk: np.ndarray) -> np.ndarray:
+    """:func:`nonmanifold_vertices` of the vertices ``walk`` (n_vertices,) bool whose edges are all manifold
+    and consistently oriented and whose faces repeat no index (False for the others), in O(m): the corners of a vertex are ordered around it by ``sigma`` (half-edge ``h``
     leaves the vertex at its corner; ``sigma(h)`` is the twin of the half-edge entering that corner,
     which leaves the same vertex in the next face), so every fan is a cycle or a path of ``sigma``. A
     vertex has one fan iff it has at most one path start (a corner whose half-edge has no twin) and
-    the walk from it (or from any corner) visits all its corners. The walks run for all vertices at
-    once, one step per corner of the largest fan."""
-    m3 = 3 * F.shape[0]
-    twin = np.full(m3, -1, dtype=np.int64)
+    the walk from it (or from any corner) first ends -- back at its start, or off the path's end --
+    after exactly as many steps as the vertex has corners. The walks run for all vertices at once,
+    one step per corner of the largest fan; with the vertices sorted by corner count, those still
+    walking at step k are a prefix, so a step is a slice, not a selection."""
+    m = F.shape[0]
+    twin = np.full(3 * m, -1, dtype=np.int64)
     twin[he.pair_a], twin[he.pair_b] = he.pair_b, he.pair_a
-    h = np.arange(m3, dtype=np.int64)
-    previous = (np.arange(0, m3, 3, dtype=np.int64)[:, None] + np.array([2, 0, 1])).ravel()  # 3 f + (k + 2) % 3
-    sigma = twin[previous]  # the twin of the previous half-edge of the face, -1 on the boundary
+    sigma = np.empty(3 * m + 1, dtype=np.int64)  # sigma[-1] = -1: a walk off a path's end stays off
+    sigma[-1] = -1
+    for k in range(3):  # the twin of the previous half-edge of the face, 3 f + (k + 2) % 3; -1 on the boundary
+        sigma[k:3 * m:3] = twin[(k + 2) % 3::3]
     vertex = F.ravel()
     corners = np.bincount(vertex, minlength=n_vertices)
     open_start = twin < 0  # a corner no sigma step reaches: a path (open fan) starts there
     starts = np.bincount(vertex[open_start], minlength=n_vertices)
     first = np.full(n_vertices, -1, dtype=np.int64)
-    first[vertex[::-1]] = h[::-1]
-    first[vertex[open_start]] = h[open_start]
-    bad = starts > 1
-    todo = np.flatnonzero((corners > 0) & ~bad)
+    first[vertex] = np.arange(3 * m, dtype=np.int64)  # some corner of each vertex (any one starts a cycle)
+    first[vertex[open_start]] = np.flatnonzero(open_start)
+    bad = (starts > 1) & walk
+    todo = np.flatnonzero((corners > 0) & walk & ~bad)
+    count = corners[todo]
+    most = int(count.max(initial=0))
+    # most corners first; a stable sort of 16-bit keys is numpy's radix sort
+    todo = todo[np.argsort((most - count).astype(np.uint16 if most < 1 << 16 else np.int64), kind="stable")]
+    count = corners[todo]
     origin = first[todo]
-    current, steps = origin.copy(), np.ones(todo.size, dtype=np.int64)
-    for _ in range(int(corners.max(initial=0))):  # a walk never takes more steps than its vertex has corners
-        if not todo.size:
-            break
-        current = sigma[current]
-        ended = (current < 0) | (current == origin)
-        bad[todo[ended]] = steps[ended] != corners[todo[ended]]
-        keep = ~ended
-        todo, origin, current, steps = todo[keep], origin[keep], current[keep], steps[keep] + 1
-    bad[todo] = True  # a walk that did not end: not one fan (cannot happen on a mesh that passed the checks)
+    current = origin.copy()
+    ended = np.zeros(todo.size, dtype=bool)  # the walk ended before its vertex's last corner
+    steps = int(count[0]) if count.size else 0
+    walking = np.searchsorted(-count, -np.arange(1, steps + 2), side="right")  # [k - 1]: vertices with >= k corners
+    for k in range(1, steps + 1):
+        now, later = walking[k - 1], walking[k]  # walking at step k; still walking after it
+        step = sigma[current[:now]]
+        current[:now] = step
+        stop = (step < 0) | (step == origin[:now])
+        ended[:later] |= stop[:later]
+        bad[todo[later:now]] = ended[later:now] | ~stop[later:now]  # vertices with exactly k corners
     return bad
 
 
@@ -346,8 +384,8 @@ def topology_report(mesh: Mesh, half_edges: HalfEdges | None = None) -> Topology
     n_boundary_edges = int(boundary.sum())
     n_nonmanifold_edges = int((counts > 2).sum())
     n_nonmanifold_vertices = int(nonmanifold_vertices(Fc, n_ref, he).sum())
-    n_components = edge_graph_components(E, n_ref)[0]
-    n_boundary_loops = _count_boundary_loops(E[boundary], n_ref)
+    n_components = he.components[0]
+    n_boundary_loops = _count_boundary_loops(E[boundary])
     chi = n_ref - n_edges + int(Fc.shape[0])
     is_manifold = n_nonmanifold_edges == 0 and n_nonmanifold_vertices == 0
     is_orientable = _is_orientable(Fc, he) if is_manifold else None

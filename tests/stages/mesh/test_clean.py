@@ -231,3 +231,25 @@ def test_a_merge_tolerance_too_small_for_double_precision_merges_exact_copies_on
     s = shapes.icosphere(2)
     result = clean_mesh(Mesh(s.V, s.F, name="ico"), CleanParams(merge_tolerance=1e-310))
     assert result.merged_vertices == 0 and result.mesh.n_vertices == len(s.V)
+
+
+def test_degenerate_faces_are_those_of_herons_formula_on_near_degenerate_triangles():
+    """libigl's cross-product areas only clear faces for certain: the mask equals the stable Heron
+    formula's (the Laplacian's) on needles and flat triangles at every scale, far from the origin too."""
+    from topomatch.stages.mesh.clean import degenerate_faces
+    from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
+
+    rng = np.random.default_rng(0)
+    for scale in (1e-45, 1e-8, 1.0, 1e6, 1e45):
+        m = 20_000
+        P = rng.standard_normal((m, 3, 3))
+        t = rng.uniform(-2, 3, (m, 1))
+        height = 10.0 ** rng.uniform(-20, -2, (m, 1)) * (rng.random((m, 1)) < 0.8)  # 20 % exactly on the line
+        P[:, 2] = P[:, 0] + t * (P[:, 1] - P[:, 0]) + height * rng.standard_normal((m, 3))
+        V = (P.reshape(-1, 3) + rng.standard_normal(3) * 1e3) * scale
+        F = np.arange(3 * m).reshape(m, 3)
+        F[::97, 2] = F[::97, 0]  # repeated indices
+        heron = ~(double_areas_and_sq_lengths(V, F)[1] > 0) | (F[:, 0] == F[:, 2])
+        mask = degenerate_faces(V, F)
+        assert 0.2 < mask.mean() < 0.9  # both kinds are present in numbers
+        np.testing.assert_array_equal(mask, heron)

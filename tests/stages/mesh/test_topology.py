@@ -169,3 +169,40 @@ def test_half_edge_sort_equals_a_stable_argsort_on_both_paths():
         order, sorted_key = _argsort_with_keys(key, bound)
         np.testing.assert_array_equal(order, np.argsort(key, kind="stable"))
         np.testing.assert_array_equal(sorted_key, np.sort(key))
+
+
+def test_nonmanifold_vertices_of_a_mesh_broken_in_a_few_places_agree_with_libigl(bundled_mesh):
+    """One mesh with a fin on an edge, a glued (bow-tie) vertex, faces of flipped orientation and a face
+    with a repeated index: the walk answers for the vertices away from them, the corner graph at them."""
+    import igl
+
+    from topomatch.stages.mesh.topology import nonmanifold_vertices
+
+    F = bundled_mesh("odedstein_hand_lowres.obj.gz").F.copy()
+    n = int(F.max()) + 1
+    F[F == 40] = 7  # glue two vertices: a bow tie at 7 (unless they shared a face)
+    F[100:103] = F[100:103, ::-1]  # three faces flipped
+    F = np.vstack([F, [[F[0, 0], F[0, 1], F[500, 2]], [F[300, 0], F[300, 0], F[300, 1]]]])  # a fin, a repeated index
+    used = np.bincount(F.ravel(), minlength=n) > 0
+    expected = ~np.asarray(igl.is_vertex_manifold(F), dtype=bool)[:n] & used
+    assert expected.any()
+    np.testing.assert_array_equal(nonmanifold_vertices(F, n), expected)
+
+
+def test_half_edges_of_closed_and_open_meshes_match_a_plain_unique(bundled_mesh):
+    """Every edge twice (the closed-manifold shortcut) or not (the run-length pass): the same edges, counts
+    and pairs of half-edges as numpy's unique on the sorted vertex pairs."""
+    from topomatch.stages.mesh.topology import HalfEdges
+
+    torus = bundled_mesh("torus.off").F
+    for F in (torus, torus[1:], np.vstack([torus, torus[:1]])):  # closed; one hole; a doubled face (counts 3)
+        n = int(F.max()) + 1
+        he = HalfEdges(F, n)
+        pairs = np.sort(np.column_stack([F.ravel(), F[:, [1, 2, 0]].ravel()]), axis=1)
+        E, inverse, counts = np.unique(pairs, axis=0, return_inverse=True, return_counts=True)
+        np.testing.assert_array_equal(he.E, E)
+        np.testing.assert_array_equal(he.counts, counts)
+        order = np.argsort(inverse.ravel(), kind="stable")  # half-edges by edge, in index order
+        same = inverse.ravel()[order][1:] == inverse.ravel()[order][:-1]
+        np.testing.assert_array_equal(he.pair_a, order[:-1][same])
+        np.testing.assert_array_equal(he.pair_b, order[1:][same])
