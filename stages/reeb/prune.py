@@ -56,23 +56,31 @@ def prune_graph(G: nx.MultiGraph, min_area_fraction: float) -> tuple[nx.MultiGra
 
     Returns the pruned copy and the number of branches removed. Node attributes
     ``area`` and ``members`` of a removed branch are merged into its junction.
+
+    Each leaf's branch and share are kept between removals: a removal changes the degree and the area
+    of its junction only, so only the branches that end there (and a junction left as a new leaf) are
+    walked again.
     """
     G = G.copy()
     total = sum(d["area"] for _, d in G.nodes(data=True)) or 1.0
+
+    def judged(leaf):
+        """(share, branch, junction) of ``leaf``'s terminal branch, or None (a chain to another leaf)."""
+        found = terminal_branch(G, leaf)
+        if found is None:
+            return None
+        branch, junction = found
+        return sum(G.nodes[v]["area"] for v in branch) / total, branch, junction
+
+    branches = {leaf: judged(leaf) for leaf in endpoints(G)}
     removed = 0
     while True:
-        candidates = []
-        for leaf in endpoints(G):
-            found = terminal_branch(G, leaf)
-            if found is None:
-                continue
-            branch, junction = found
-            share = sum(G.nodes[v]["area"] for v in branch) / total
-            if share < min_area_fraction:
-                candidates.append((share, str(leaf), branch, junction))
+        candidates = [(b[0], str(leaf), leaf) for leaf, b in branches.items()
+                      if b is not None and b[0] < min_area_fraction]
         if not candidates:
             return G, removed
-        _, _, branch, junction = min(candidates, key=lambda c: (c[0], c[1]))
+        leaf = min(candidates, key=lambda c: c[:2])[2]
+        _, branch, junction = branches.pop(leaf)
         if junction != ROOT:
             j = G.nodes[junction]
             merged = j["area"] + sum(G.nodes[v]["area"] for v in branch)
@@ -80,6 +88,11 @@ def prune_graph(G: nx.MultiGraph, min_area_fraction: float) -> tuple[nx.MultiGra
             nx.set_node_attributes(G, {junction: {"area": merged, "members": members}})
         G.remove_nodes_from(branch)
         removed += 1
+        again = [other for other, b in branches.items() if b is not None and b[2] == junction]
+        if junction in G and junction != ROOT and G.degree(junction) == 1:
+            again.append(junction)
+        for other in again:
+            branches[other] = judged(other)
 
 
 def cycle_rank(G: nx.MultiGraph) -> int:
