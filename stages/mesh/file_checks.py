@@ -28,6 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
+import numpy as np
+
 from topomatch.pipeline.contract import InputError, limit_from_env
 
 #: Largest decompressed mesh file (bytes); ``$TOPOMATCH_MAX_MESH_BYTES`` overrides it.
@@ -131,6 +133,27 @@ def _int(token: bytes, path: Path, what: str) -> int:
     if value < 0:
         raise InputError(path, f"malformed header: {what} is negative ({value})")
     return value
+
+
+def _ascii_lines(data: bytes) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The non-blank lines of ``data``, as ``bytes.splitlines`` splits them (at ``\\n``, ``\\r``): per line, the
+    offset of its first token and of its end, its number of tokens (split at the whitespace ``bytes.split``
+    takes), and whether its first token is ``b"3"``. A few numpy passes over the bytes instead of a Python
+    loop over the lines (the faces of an ASCII PLY of 1.5 M faces: ~0.4 s against ~2.9 s)."""
+    a = np.frombuffer(data, dtype=np.uint8)
+    space = (a == 32) | ((a - np.uint8(9)) <= 4)  # b" \\t\\n\\x0b\\x0c\\r" (uint8 wraps below 9)
+    breaks = np.flatnonzero((a == 10) | (a == 13))
+    token = np.flatnonzero(~space[1:] & space[:-1]) + 1  # offsets where a token starts
+    if a.size and not space[0]:
+        token = np.r_[0, token]
+    ends = np.r_[breaks, a.size]
+    before = np.searchsorted(token, np.r_[0, breaks + 1])  # tokens before each line's start ...
+    tokens = np.searchsorted(token, ends) - before  # ... and on the line
+    keep = tokens > 0
+    first = token[before[keep]]
+    after = np.minimum(first + 1, max(a.size - 1, 0))
+    triangle = (a[first] == ord("3")) & ((first + 1 == a.size) | space[after])
+    return first, ends[keep], tokens[keep], triangle
 
 
 def _face_sizes(face_lines: list[bytes], path: Path, line_offset: int) -> int:
@@ -245,15 +268,19 @@ def check_ply(plain: Path, path: Path) -> FileFacts:
     body = plain.stat().st_size - body_start
     polygons = 0
     if fmt == b"ascii":
-        body_lines = [line for line in plain.read_bytes()[body_start:].splitlines() if line.strip()]
+        body = plain.read_bytes()[body_start:]
+        first, end, tokens, triangle = _ascii_lines(body)
         needed = sum(e[1] for e in elements)
-        if len(body_lines) < needed:
+        if len(tokens) < needed:
             raise InputError(path, f"malformed PLY file: truncated, the header declares {needed} element lines "
-                                   f"but only {len(body_lines)} follow")
+                                   f"but only {len(tokens)} follow")
         start = 0
         for name, count, _, kinds in elements:
             if name == b"face" and kinds[:1] == [True] and sum(kinds) == 1:
-                polygons = _ply_face_sizes(body_lines[start:start + count], len(kinds) - 1, path)
+                rows = slice(start, start + count)  # the usual line, '3 i j k' and the scalars, needs no more look
+                other = np.flatnonzero(~(triangle[rows] & (tokens[rows] == 4 + len(kinds) - 1)))
+                polygons = _ply_face_sizes([body[first[start + i]:end[start + i]] for i in other], len(kinds) - 1,
+                                           path, other)
             start += count
     else:
         needed = sum(e[1] * e[2] for e in elements)
@@ -263,12 +290,12 @@ def check_ply(plain: Path, path: Path) -> FileFacts:
     return FileFacts(counts.get(b"vertex"), counts.get(b"face"), polygons)
 
 
-def _ply_face_sizes(face_lines: list[bytes], n_scalars: int, path: Path) -> int:
-    """Number of polygons among ASCII PLY face lines (a vertex list, then ``n_scalars`` values);
-    raises when a line's length disagrees with its list count (the readers would shift every
-    following face) or a face has fewer than 3 vertices."""
+def _ply_face_sizes(face_lines: list[bytes], n_scalars: int, path: Path, numbers: np.ndarray) -> int:
+    """Number of polygons among ASCII PLY face lines (a vertex list, then ``n_scalars`` values) whose face
+    numbers are ``numbers``; raises when a line's length disagrees with its list count (the readers would
+    shift every following face) or a face has fewer than 3 vertices."""
     polygons = 0
-    for i, line in enumerate(face_lines):
+    for i, line in zip(numbers.tolist(), face_lines):
         tokens = line.split()
         count = _int(tokens[0], path, f"the vertex count of face {i}")
         if count < 3:

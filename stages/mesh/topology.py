@@ -250,8 +250,9 @@ def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges |
     hard = np.zeros(n_vertices, dtype=bool)  # vertices the walk cannot go around
     hard[he.E[he.counts > 2].ravel()] = True
     disagree = he.pair_a[he.disagreeing]  # a half-edge of each edge whose two faces disagree in orientation
-    hard[F.ravel()[disagree]] = True  # its start ...
-    hard[F[:, [1, 2, 0]].ravel()[disagree]] = True  # ... and its end
+    if disagree.size:
+        hard[F.ravel()[disagree]] = True  # its start ...
+        hard[F.ravel()[disagree - disagree % 3 + (disagree + 1) % 3]] = True  # ... and its end (the next corner)
     hard[F[(F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])].ravel()] = True
     bad = _walk_fans(F, n_vertices, he, ~hard)
     if hard.any():

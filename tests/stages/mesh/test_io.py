@@ -233,3 +233,19 @@ def test_polygon_ply_is_read_not_aborted(tmp_path):
     import igl
 
     assert mesh.n_faces == 2 and np.isclose(igl.doublearea(mesh.V, mesh.F).sum() / 2, 1.0)
+
+
+def test_ascii_line_scan_agrees_with_python_split():
+    """The vectorised scan of ASCII PLY bodies sees the lines ``bytes.splitlines`` sees, the tokens ``bytes.split``
+    sees, and a leading b"3" exactly where Python's first token is b"3" (fuzzed bytes, every whitespace kind)."""
+    from topomatch.stages.mesh.file_checks import _ascii_lines
+
+    rng = np.random.default_rng(0)
+    alphabet = [b" ", b"\t", b"\n", b"\r", b"\x0b", b"\x0c", b"3", b"4", b"1", b"-", b"33", b"3.5"]
+    for _ in range(2000):
+        data = b"".join(rng.choice(alphabet, size=int(rng.integers(0, 40))).tolist())
+        first, end, tokens, triangle = _ascii_lines(data)
+        lines = [line for line in data.splitlines() if line.strip()]
+        assert [data[a:b].strip() for a, b in zip(first, end)] == [line.strip() for line in lines]
+        assert tokens.tolist() == [len(line.split()) for line in lines]
+        assert triangle.tolist() == [line.split()[0] == b"3" for line in lines]
