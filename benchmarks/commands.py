@@ -45,7 +45,8 @@ TOPOMATCH = [sys.executable, "-m", "topomatch"]
 
 #: The environment of the measured commands: a user's, whose Python writes and then reuses the bytecode
 #: of the project's modules. (A sandbox that sets PYTHONDONTWRITEBYTECODE=1 makes every command compile
-#: them again: +0.35 s for ``register`` on 2026-12-02.) Each command also runs once, untimed, first.
+#: them again: +0.35 s for ``register`` on 2026-12-02.) Each command also runs once, untimed, first, but
+#: the large skeletons (10 s each): their first run compiles the mixture modules, and minima are reported.
 USER_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 

@@ -211,9 +211,11 @@ def degenerate_faces(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     Heron's formula is measured only on the faces libigl's cross-product areas (``igl.doublearea``,
     ``igl.squared_edge_lengths``: ~5x cheaper) cannot clear: a face with double area ``D >= t a^2``
     (``a`` its longest edge, ``t`` = :data:`CERTAINLY_NOT_DEGENERATE`) has, with sides a >= b >= c,
-    ``b + c - a >= D^2 / (3 a^3) >= t^2 a / 3``, some 10^4 times the rounding error of the computed
-    lengths (~12 eps a), so the radicand is positive; faces with ``a`` below 1e-50 are measured too
-    (the radicand could underflow). The mask equals Heron's on every face (tests).
+    ``b + c - a >= D^2 / (3 a^3) >= t^2 a / 3 = 3.3e-13 a``, over 100 times the rounding error of the
+    computed lengths (~12 eps a = 2.7e-15 a), so the radicand is positive; faces with ``a`` below 1e-50
+    are measured too (the radicand could underflow). The mask equals Heron's on the meshes ``clean``
+    accepts (extents up to 1e50, tests); beyond ~1e77 Heron's squares overflow to NaN (a face flagged
+    degenerate) while libigl's areas are infinite (a face kept).
     """
     repeated = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])
     if F.shape[0] == 0:
@@ -257,7 +259,7 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     return dup
 
 
-def _face_components(F: np.ndarray, n_vertices: int, half_edges: HalfEdges) -> tuple[int, np.ndarray]:
+def _face_components(F: np.ndarray, half_edges: HalfEdges) -> tuple[int, np.ndarray]:
     """(number of connected components, (m,) component of each face) of a mesh without unreferenced
     vertices, from its half-edges; components are numbered by their smallest vertex, as
     ``igl.vertex_components`` numbers them."""
@@ -343,7 +345,7 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     unchanged = V is mesh.V and F is mesh.F  # nothing was repaired: the topology is the one measured
     half_edges = None if unchanged else HalfEdges(F, V.shape[0])  # of the repaired mesh, shared with its report
     n_components, face_label = ((before.n_components, None) if unchanged
-                                else _face_components(F, V.shape[0], half_edges))
+                                else _face_components(F, half_edges))
     dropped_components = dropped_faces = dropped_vertices = 0
     if n_components > 1 and params.components == "fail":
         raise InputError(mesh.name, f"mesh has {n_components} connected components; "
@@ -351,7 +353,7 @@ def clean_mesh(mesh: Mesh, params: CleanParams | None = None) -> CleanResult:
     if n_components > 1 and params.components == "largest":
         if face_label is None:
             half_edges = HalfEdges(F, V.shape[0])
-            _, face_label = _face_components(F, V.shape[0], half_edges)
+            _, face_label = _face_components(F, half_edges)
         keep = int(np.argmax(np.bincount(face_label, minlength=n_components)))
         mask = face_label == keep
         dropped_components = n_components - 1

@@ -25,13 +25,13 @@ manifold (it splits the boundary of a Möbius strip into single vertices). So th
 faces are re-indexed to the referenced vertices first and boundary loops are
 counted from edge incidences.
 
-Cost: every count comes from one sort of the 3m half-edges (:class:`HalfEdges`): edges and
-their incidences, boundary and non-manifold edges, the fans around each vertex, and the
-orientation (an edge-manifold mesh whose two half-edges per interior edge run opposite ways is
-consistently oriented, hence orientable; only a mesh that is not is searched further, with
-``igl.bfs_orient``). Components are connected components of the edge graph (scipy). On the
-48k-vertex horse the report takes about 25 ms, under one ``igl.cotmatrix`` (``benchmarks/
-skeleton_command.py``).
+Cost: every count comes from one sort of the 3m half-edges (:class:`HalfEdges`; on a broken mesh a
+second, small one of the faces around its non-manifold places): edges and their incidences, boundary and
+non-manifold edges, the fans around each vertex, and the orientation (an edge-manifold mesh whose two
+half-edges per interior edge run opposite ways is consistently oriented, hence orientable; only a mesh
+that is not is searched further, with ``igl.bfs_orient``). Components are connected components of the
+edge graph (scipy). On the 48k-vertex horse the report takes about 25 ms, under one ``igl.cotmatrix``
+(``benchmarks/commands.py`` times the command).
 """
 
 from __future__ import annotations
@@ -127,9 +127,11 @@ class HalfEdges:
         self.F, self.n_vertices = F, n_vertices
         u, w = F.ravel(), F[:, [1, 2, 0]].ravel()
         self.forward = u < w  # the half-edge runs from lo to hi
+        lo, hi = np.minimum(u, w), np.maximum(u, w)
         bits = max(int(max(n_vertices, 1) - 1).bit_length(), 1)
-        key = (np.minimum(u, w) << bits) | np.maximum(u, w)  # E follows from a key by two bit operations
-        order, sorted_key = _argsort_with_keys(key, 1 << (2 * bits))
+        wide = 2 * bits > 62  # over 2^31 vertices a shifted key would overflow: a product instead
+        key = lo * n_vertices + hi if wide else (lo << bits) | hi  # the edges follow from the keys
+        order, sorted_key = _argsort_with_keys(key, n_vertices ** 2 if wide else 1 << (2 * bits))
         if key.size % 2 == 0 and np.array_equal(sorted_key[0::2], sorted_key[1::2]) and not np.any(
                 sorted_key[2::2] == sorted_key[1:-1:2]):  # every edge twice: closed, edge-manifold
             heads = sorted_key[0::2]
@@ -143,7 +145,8 @@ class HalfEdges:
             same = sorted_key[1:] == sorted_key[:-1]
             self.pair_a, self.pair_b = order[:-1][same], order[1:][same]
         self.E = np.empty((heads.size, 2), dtype=np.int64)
-        self.E[:, 0], self.E[:, 1] = heads >> bits, heads & ((1 << bits) - 1)
+        mask = (1 << bits) - 1
+        self.E[:, 0], self.E[:, 1] = np.divmod(heads, n_vertices) if wide else (heads >> bits, heads & mask)
 
     @cached_property
     def disagreeing(self) -> np.ndarray:
@@ -263,14 +266,15 @@ def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges |
 
 def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges, walk: np.ndarray) -> np.ndarray:
     """:func:`nonmanifold_vertices` of the vertices ``walk`` (n_vertices,) bool whose edges are all manifold
-    and consistently oriented and whose faces repeat no index (False for the others), in O(m): the corners of a vertex are ordered around it by ``sigma`` (half-edge ``h``
-    leaves the vertex at its corner; ``sigma(h)`` is the twin of the half-edge entering that corner,
-    which leaves the same vertex in the next face), so every fan is a cycle or a path of ``sigma``. A
-    vertex has one fan iff it has at most one path start (a corner whose half-edge has no twin) and
-    the walk from it (or from any corner) first ends -- back at its start, or off the path's end --
-    after exactly as many steps as the vertex has corners. The walks run for all vertices at once,
-    one step per corner of the largest fan; with the vertices sorted by corner count, those still
-    walking at step k are a prefix, so a step is a slice, not a selection."""
+    and consistently oriented and whose faces repeat no index (False for the others), in O(m): the
+    corners of a vertex are ordered around it by ``sigma`` (half-edge ``h`` leaves the vertex at its
+    corner; ``sigma(h)`` is the twin of the half-edge entering that corner, which leaves the same vertex
+    in the next face), so every fan is a cycle or a path of ``sigma``. A vertex has one fan iff it has
+    at most one path start (a corner whose half-edge has no twin) and the walk from it (or from any
+    corner) first ends -- back at its start, or off the path's end -- after exactly as many steps as the
+    vertex has corners. The walks run for all vertices at once, one step per corner of the vertex with
+    most corners (or until every walk left has ended early); with the vertices sorted by corner count,
+    those still walking at step k are a prefix, so a step is a slice, not a selection."""
     m = F.shape[0]
     twin = np.full(3 * m, -1, dtype=np.int64)
     twin[he.pair_a], twin[he.pair_b] = he.pair_b, he.pair_a
@@ -304,6 +308,9 @@ def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges, walk: np.ndarray) 
         stop = (step < 0) | (step == origin[:now])
         ended[:later] |= stop[:later]
         bad[todo[later:now]] = ended[later:now] | ~stop[later:now]  # vertices with exactly k corners
+        if later and ended[:later].all():  # every walk left has ended before its last corner: not one fan
+            bad[todo[:later]] = True
+            break
     return bad
 
 

@@ -206,3 +206,26 @@ def test_half_edges_of_closed_and_open_meshes_match_a_plain_unique(bundled_mesh)
         same = inverse.ravel()[order][1:] == inverse.ravel()[order][:-1]
         np.testing.assert_array_equal(he.pair_a, order[:-1][same])
         np.testing.assert_array_equal(he.pair_b, order[1:][same])
+
+
+def test_half_edges_of_vertex_indices_beyond_32_bits_are_not_wrapped():
+    """Over 2^31 vertices a shifted edge key would overflow: the edges keep their true vertex indices."""
+    from topomatch.stages.mesh.topology import edge_incidence
+
+    b = 2 ** 31
+    E, counts = edge_incidence(np.array([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]))
+    np.testing.assert_array_equal(E, [[b, b + 1], [b, b + 2], [b + 1, b + 2], [b + 1, b + 3], [b + 2, b + 3]])
+    np.testing.assert_array_equal(counts, [1, 1, 2, 1, 1])
+
+
+def test_a_vertex_with_many_corners_whose_walk_ends_early_is_non_manifold_quickly():
+    """Many closed three-face cones sharing an apex: one vertex with 3k corners whose walk ends after 3
+    steps (several fans); the walks stop once every walk left has ended, not after 3k steps."""
+    from topomatch.stages.mesh.topology import nonmanifold_vertices
+
+    k = 2000
+    base = 1 + 3 * np.arange(k)[:, None]  # cone i: apex 0 and the ring base_i, base_i + 1, base_i + 2
+    ring = base + np.array([0, 1, 2])
+    F = np.concatenate([np.column_stack([np.zeros(k, int), ring[:, j], ring[:, (j + 1) % 3]]) for j in range(3)])
+    bad = nonmanifold_vertices(F, 1 + 3 * k)
+    assert bad[0] and bad.sum() == 1
