@@ -124,3 +124,14 @@ def test_the_command_serves_large_arrays_from_the_heap():
     mmapped = {how: subprocess.run([sys.executable, "-c", _MMAPPED_BYTES, how], capture_output=True, text=True,
                                    check=True).stdout.strip() for how in ("default", "keep")}
     assert mmapped == {"default": "1", "keep": "0"}
+
+
+def test_a_closed_stdout_pipe_ends_the_command_quietly():
+    """`topomatch stages | head -1`: the reader leaves before the listing is written; the command stops with
+    128 + SIGPIPE and no traceback (it printed one through Python's final flush before)."""
+    proc = subprocess.Popen([sys.executable, "-m", "topomatch", "stages"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+    proc.stdout.close()  # long before the interpreter has started and imported the stages
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 141
+    assert b"Traceback" not in err and b"Broken pipe" not in err

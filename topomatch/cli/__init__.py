@@ -91,6 +91,17 @@ def _fail(args: argparse.Namespace, message: str, status: int, kind: str, exc: B
     return status
 
 
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that Python's final flush does not fail on a closed pipe again."""
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # no real file descriptor (a test's captured stdout)
+        pass
+
+
 def main(argv: list[str] | None = None) -> int:
     if argv is None:  # the command (not a call from Python): large numpy temporaries reuse freed memory
         keep_freed_memory()
@@ -103,6 +114,9 @@ def main(argv: list[str] | None = None) -> int:
                         level={-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO}.get(level, logging.DEBUG))
     try:
         return args.handler(args)
+    except BrokenPipeError:  # the reader of stdout left (`topomatch ... --json | head`): stop quietly
+        _silence_stdout()
+        return 141  # 128 + SIGPIPE, as a shell reports a command killed by a closed pipe
     except TopomatchError as exc:
         if args.debug:
             raise
