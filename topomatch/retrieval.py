@@ -217,9 +217,11 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     share (load, clean, decimate, spectrum) are computed once, in memory, and the workers share out
     the meshes. Unchanged meshes (same content, method and parameters) are skipped.
 
-    Open meshes (with boundaries) are indexed as they are: the Laplace-Beltrami operator of the
-    intrinsic parts has natural (Neumann) boundary conditions and the skeleton's geodesics stay on
-    the surface; a mesh with several components keeps its largest. :class:`IndexReport` lists both.
+    Open meshes (with boundaries): the intrinsic parts of the default method cap every hole of their
+    decimated copy (``fill_holes``: a fan to each boundary loop's centroid) before the spectrum, heat
+    kernel and skeleton; methods without that stage (``shapedna-full``, the thesis skeletons) use natural
+    (Neumann) boundary conditions. A mesh with several components keeps its largest. :class:`IndexReport`
+    lists both.
 
     Raises
     ------

@@ -21,8 +21,9 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
   with the cosine of the items' diffusion states);
   ``topomatch-equal``: the first fusion (equal weights, k = 10), kept for comparison.
 
-The intrinsic methods (agd, hks, shapedna) work on a copy decimated to 6,000 faces and share its 40
-leading eigenpairs (:data:`SPECTRAL_CHAIN`; computed once per mesh when indexing).
+The intrinsic methods (agd, hks, shapedna) work on a copy decimated to 6,000 faces, its holes capped
+(``fill_holes``), and share its 40 leading eigenpairs (:data:`SPECTRAL_CHAIN`; computed once per mesh
+when indexing).
 """
 
 from __future__ import annotations
@@ -47,12 +48,14 @@ CLEAN_CHAIN: tuple[Any, ...] = ("load", {"clean": {"components": "largest"}})
 D2_PAIRS = 1 << 16
 SH_POINTS = 1 << 15
 
-#: Cleaned, decimated (6,000 faces) mesh and its 40 leading eigenpairs: the intrinsic methods' prefix (40, not
-#: the earlier 60, chosen by ``benchmarks/retrieval_part_costs.py`` on tune collections: the same retrieval,
-#: ARPACK 1.6x faster).
+#: Cleaned, decimated (6,000 faces) mesh, its holes capped, and its 40 leading eigenpairs: the intrinsic methods'
+#: prefix (40, not the earlier 60, chosen by ``benchmarks/retrieval_part_costs.py`` on tune collections: the same
+#: retrieval, ARPACK 1.6x faster; the capping adopted on 2026-12-02 by a rule written before the tune
+#: collections were indexed with it, docs/retrieval.md).
 SPECTRAL_CHAIN: tuple[Any, ...] = CLEAN_CHAIN + (
     {"decimate": {"target_faces": 6000}},
     {"clean": {"components": "largest"}},
+    "fill_holes",
     {"spectrum": {"k": 40}},
 )
 

@@ -64,7 +64,8 @@ MESH_CHAIN = [
     {"transform": {"axis": [1.0, 0.0, 0.0], "angle_deg": 30.0, "scale": 2.0}},
     {"decimate": {"ratio": 0.5}}, {"decimate_crosscheck": {"ratio": 0.5}}, {"clean": {"components": "largest"}},
     "laplacian", "fiedler", {"morse": {"function": "mixture"}}, "level_sets", "reeb_graph", "prune",
-    "endpoint_descriptor", "libigl_reference", {"spectrum": {"k": 20}}, "hks", {"shapedna_of_spectrum": {"k": 10}},
+    "endpoint_descriptor", "libigl_reference", "fill_holes", {"spectrum": {"k": 20}}, "hks",
+    {"shapedna_of_spectrum": {"k": 10}},
     "endpoint_hks_descriptor",
     "d2", "spherical_harmonics", {"shapedna": {"k": 10}},
 ]

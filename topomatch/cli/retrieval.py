@@ -177,9 +177,14 @@ def cmd_index(args: argparse.Namespace) -> int:
             print(f"{args.labels}: {n} labelled {'paths are' if n > 1 else 'path is'} no mesh file of this run "
                   f"(misspelt, missing or not given): {shown}", file=sys.stderr)
         if report.open_meshes:
+            from topomatch.stages.retrieval.catalogue import get_method
+
             n = len(report.open_meshes)
-            print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries): the spectrum, heat kernel and "
-                  f"skeleton use natural (Neumann) boundary conditions")
+            capped = any("fill_holes" in get_method(p).chain for p in get_method(report.method).parts)
+            print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries): " + (
+                "their holes were capped (a fan to each boundary loop's centroid) for the spectrum, heat kernel "
+                "and skeleton; D2 and spherical harmonics see them as they are" if capped else
+                "the spectrum, heat kernel and skeleton use natural (Neumann) boundary conditions"))
         if report.multi_component_meshes:
             n = len(report.multi_component_meshes)
             print(f"{n} {'meshes have' if n > 1 else 'mesh has'} several components: the largest was indexed")
