@@ -139,6 +139,16 @@ def _row_hashes(X: np.ndarray) -> np.ndarray:
     return h
 
 
+def _repeated(x: np.ndarray) -> np.ndarray:
+    """(n,) bool: the elements of ``x`` (n,) whose value another element has. One sort; the lookup only
+    when some value repeats (the usual mesh has none)."""
+    s = np.sort(x)
+    values = np.unique(s[1:][s[1:] == s[:-1]])
+    if not values.size:
+        return np.zeros(x.size, dtype=bool)
+    return values[np.minimum(np.searchsorted(values, x), values.size - 1)] == x
+
+
 def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[np.ndarray, np.ndarray]:
     """Merge vertices that ``igl.remove_duplicate_vertices`` finds equal up to ``eps``, keeping the vertex order.
 
@@ -168,12 +178,9 @@ def merge_duplicate_vertices(V: np.ndarray, F: np.ndarray, eps: float) -> tuple[
     with np.errstate(over="ignore"):
         if eps > 0 and V.size and not np.isfinite(float(np.abs(V).max()) / eps):
             eps = 0.0
-    h = _row_hashes(_igl_merge_grid(V, eps))
-    sorted_h = np.sort(h)
-    shared = np.unique(sorted_h[1:][sorted_h[1:] == sorted_h[:-1]])
-    if not shared.size:  # libigl would merge nothing
+    candidates = np.flatnonzero(_repeated(_row_hashes(_igl_merge_grid(V, eps))))
+    if not candidates.size:  # libigl would merge nothing
         return V, F
-    candidates = np.flatnonzero(shared[np.minimum(np.searchsorted(shared, h), shared.size - 1)] == h)
     _, _, group = igl.remove_duplicate_vertices(np.ascontiguousarray(V[candidates]), eps)
     first = np.full(int(group.max()) + 1, V.shape[0], dtype=np.int64)
     np.minimum.at(first, group, candidates)  # the first vertex of each merged group
@@ -242,14 +249,10 @@ def duplicate_faces(F: np.ndarray) -> np.ndarray:
     n = int(hi.max()) + 1
     if n ** 3 < 2 ** 63:  # one int64 key per face
         key = (lo * n + mid) * n + hi
-        sorted_key = np.sort(key)
-        repeated = sorted_key[1:][sorted_key[1:] == sorted_key[:-1]]
+        shared = np.flatnonzero(_repeated(key))  # the faces whose key another face has
         dup = np.zeros(F.shape[0], dtype=bool)
-        if not repeated.size:  # the usual case
+        if not shared.size:  # the usual case
             return dup
-        repeated = np.unique(repeated)
-        at = np.minimum(np.searchsorted(repeated, key), repeated.size - 1)
-        shared = np.flatnonzero(repeated[at] == key)  # the faces whose key another face has
         order = shared[np.argsort(key[shared], kind="stable")]  # the first of equal faces first
         dup[order[1:][key[order][1:] == key[order][:-1]]] = True
         return dup

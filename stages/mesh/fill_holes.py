@@ -22,7 +22,7 @@ from pydantic import Field
 
 from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.mesh.topology import HalfEdges, edge_graph_components
+from topomatch.stages.mesh.topology import HalfEdges, boundary_loops
 
 
 class FillHolesParams(Params):
@@ -72,15 +72,12 @@ def fill_holes_mesh(mesh: Mesh, params: FillHolesParams | None = None) -> FillHo
     params = params or FillHolesParams()
     V, F, n = mesh.V, mesh.F, mesh.n_vertices
     he = HalfEdges(F, n)
-    boundary = np.ones(3 * mesh.n_faces, dtype=bool)  # half-edges on an edge of one face
-    boundary[he.pair_a] = boundary[he.pair_b] = False
-    h = np.flatnonzero(boundary)
+    h = np.flatnonzero(he.twin < 0)  # half-edges on an edge of one face
     if not h.size:
         return FillHolesResult(mesh, 0, 0)
-    u, w = F.ravel()[h], F[:, [1, 2, 0]].ravel()[h]
-    vertices, local = np.unique(np.concatenate([u, w]), return_inverse=True)
-    n_loops, label = edge_graph_components(local.reshape(2, -1).T, len(vertices))
-    loop = label[local[: h.size]]  # the loop of each boundary half-edge
+    u, w = he.ends(h)
+    n_loops, vertices, label = boundary_loops(np.column_stack([u, w]))
+    loop = label[np.searchsorted(vertices, u)]  # the loop of each boundary half-edge
     size = np.bincount(label, minlength=n_loops)  # vertices per loop
     keep = size >= 3
     if params.max_loop_vertices is not None:

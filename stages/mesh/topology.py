@@ -149,6 +149,21 @@ class HalfEdges:
         self.E[:, 0], self.E[:, 1] = np.divmod(heads, n_vertices) if wide else (heads >> bits, heads & mask)
 
     @cached_property
+    def twin(self) -> np.ndarray:
+        """(3m,) the other half-edge of each half-edge's edge, -1 on the boundary (an edge of one face).
+        Meaningful for edge-manifold edges; a half-edge of an edge with three faces or more has some other
+        half-edge of it (never -1)."""
+        twin = np.full(3 * self.F.shape[0], -1, dtype=np.int64)
+        twin[self.pair_a], twin[self.pair_b] = self.pair_b, self.pair_a
+        return twin
+
+    def ends(self, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(start, end) vertices of the half-edges ``h``: half-edge ``3 f + k`` runs from corner ``k`` of
+        face ``f`` to corner ``k + 1``."""
+        corners = self.F.ravel()
+        return corners[h], corners[h - h % 3 + (h + 1) % 3]
+
+    @cached_property
     def disagreeing(self) -> np.ndarray:
         """(len(pair_a),) bool: the two faces of the pair traverse their edge in the same direction (their
         orientations disagree). Computed once: the fan test and the orientability test both ask."""
@@ -224,12 +239,14 @@ def edge_graph_components(E: np.ndarray, n_vertices: int) -> tuple[int, np.ndarr
     return int(count), labels
 
 
-def _count_boundary_loops(E_boundary: np.ndarray) -> int:
-    """Connected components of the graph formed by the boundary edges (k, 2) (on their own vertices only)."""
+def boundary_loops(E_boundary: np.ndarray) -> tuple[int, np.ndarray, np.ndarray]:
+    """Connected components of the graph of the boundary edges ``E_boundary`` (k, 2), on their own vertices:
+    (count, (v,) the vertices, (v,) the loop of each). On a manifold mesh these are the boundary cycles."""
     if len(E_boundary) == 0:
-        return 0
+        return 0, np.zeros(0, np.int64), np.zeros(0, np.int64)
     vertices, local = np.unique(E_boundary, return_inverse=True)
-    return edge_graph_components(local.reshape(-1, 2), len(vertices))[0]
+    count, labels = edge_graph_components(local.reshape(-1, 2), len(vertices))
+    return count, vertices, np.asarray(labels, dtype=np.int64)
 
 
 def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges | None = None) -> np.ndarray:
@@ -254,8 +271,8 @@ def nonmanifold_vertices(F: np.ndarray, n_vertices: int, half_edges: HalfEdges |
     hard[he.E[he.counts > 2].ravel()] = True
     disagree = he.pair_a[he.disagreeing]  # a half-edge of each edge whose two faces disagree in orientation
     if disagree.size:
-        hard[F.ravel()[disagree]] = True  # its start ...
-        hard[F.ravel()[disagree - disagree % 3 + (disagree + 1) % 3]] = True  # ... and its end (the next corner)
+        for end in he.ends(disagree):
+            hard[end] = True
     hard[F[(F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 2] == F[:, 0])].ravel()] = True
     bad = _walk_fans(F, n_vertices, he, ~hard)
     if hard.any():
@@ -276,8 +293,7 @@ def _walk_fans(F: np.ndarray, n_vertices: int, he: HalfEdges, walk: np.ndarray) 
     most corners (or until every walk left has ended early); with the vertices sorted by corner count,
     those still walking at step k are a prefix, so a step is a slice, not a selection."""
     m = F.shape[0]
-    twin = np.full(3 * m, -1, dtype=np.int64)
-    twin[he.pair_a], twin[he.pair_b] = he.pair_b, he.pair_a
+    twin = he.twin
     sigma = np.empty(3 * m + 1, dtype=np.int64)  # sigma[-1] = -1: a walk off a path's end stays off
     sigma[-1] = -1
     for k in range(3):  # the twin of the previous half-edge of the face, 3 f + (k + 2) % 3; -1 on the boundary
@@ -393,7 +409,7 @@ def topology_report(mesh: Mesh, half_edges: HalfEdges | None = None) -> Topology
     n_nonmanifold_edges = int((counts > 2).sum())
     n_nonmanifold_vertices = int(nonmanifold_vertices(Fc, n_ref, he).sum())
     n_components = he.components[0]
-    n_boundary_loops = _count_boundary_loops(E[boundary])
+    n_boundary_loops = boundary_loops(E[boundary])[0]
     chi = n_ref - n_edges + int(Fc.shape[0])
     is_manifold = n_nonmanifold_edges == 0 and n_nonmanifold_vertices == 0
     is_orientable = _is_orientable(Fc, he) if is_manifold else None
