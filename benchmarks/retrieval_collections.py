@@ -27,6 +27,9 @@ Builds, from the shared classic and Watertight meshes, these labelled collection
 * ``hires_report`` (seed 14, 60 % open; report only): the report sources with the class sizes of TOSCA
   (:data:`TOSCA_SIZES`), every pose midpoint-subdivided once (~40,000 vertices, as the hidden collection's
   ~50,000), built on 2026-12-02 (second session) with no choice made after it;
+* ``hires_twins_tune`` (seed 16; tune) and ``hires_twins_report`` (seed 17; report only): ``hires_*`` with
+  every character beside its twin in a class of the same size (built 2026-12-02, third session, before the protocol
+  was run on them);
 * ``twins_tune`` (seed 12, 60 % open) and ``twins_report`` (seed 13, 60 % open): every tune (report) source
   beside its :func:`twin`, a similar character in a class of its own (stretched, with two bulges), as two
   people modelled from one template: after ``hard_tune``'s difficulty turned out to be label noise, the
@@ -230,7 +233,11 @@ def main() -> None:
             # the hidden collection's shape as issue 10 describes it (9 characters in poses, classes of 3 to 20,
             # many open, ~50k vertices), from the report sources: TOSCA's class sizes, subdivided poses
             ("hires_report", [classic / s for s in REPORT], 14, 0.6, False, TOSCA_SIZES, True),
-            ("hires_tune", [classic / s for s in TUNE], 15, 0.6, False, TOSCA_SIZES, True)):
+            ("hires_tune", [classic / s for s in TUNE], 15, 0.6, False, TOSCA_SIZES, True),
+            # 2026-12-02 (third session): the same with every character beside its twin (TOSCA holds two men, David and
+            # Michael): the tune side's hidden-like hard case, and its report counterpart
+            ("hires_twins_tune", [classic / s for s in TUNE], 16, 0.6, True, TOSCA_SIZES, True),
+            ("hires_twins_report", [classic / s for s in REPORT], 17, 0.6, True, TOSCA_SIZES, True)):
         if args.only and name not in args.only:
             continue
         twins, sizes, subdivide = (list(with_twins) + [False, None, False])[:3]

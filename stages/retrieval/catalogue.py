@@ -15,9 +15,9 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
 - ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum (read from
   the shared spectrum; ``shapedna-full``: its own eigen-solve on the full mesh, kept for comparison);
 - ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
-- ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (each part weighted by its
-  agreement with the others and dropped below 0.5 of the best agreement, a pair's two smallest scaled
-  dissimilarities averaged, re-ranked by manifold ranking, k from the collection's size, alpha = 0.95,
+- ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (a part dropped when its agreement
+  with the others is below 0.5 of the best part's, each kept part scaled by its median, a pair's two
+  smallest scaled dissimilarities averaged, re-ranked by manifold ranking, k from the collection's size, alpha = 0.95,
   with the cosine of the items' diffusion states);
   ``topomatch-equal``: the first fusion (equal weights, k = 10), kept for comparison.
 
@@ -126,12 +126,12 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("sh", "rotation-invariant spherical harmonics (Kazhdan 2003), 2^15 surface points", "vector",
            CLEAN_CHAIN + ({"spherical_harmonics": {"n_points": SH_POINTS}},),
            distance=spherical_harmonics.distance_matrix),
-    Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: each part weighted by its agreement with "
-           "the others (a part that agrees less looks farther; below 0.5 of the best, it is dropped), a pair's two "
-           "smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size, "
+    Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: a part whose nearest neighbours agree "
+           "with the others' less than 0.5 of the best part's is dropped, each kept part scaled by its median, a "
+           "pair's two smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size, "
            "alpha = 0.95, the cosine of the items' diffusion states)",
            "fusion", fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.95, order_weights=(1, 1), screen=0.5,
-                                   agreement_power=2.0, rerank_normalisation=0.5)),
+                                   agreement_power=0.0, rerank_normalisation=0.5)),
     Method("topomatch-equal", "the first fusion (kept for comparison): agd, hks, shapedna, d2 and sh with equal "
            "weights, manifold ranking with k = 10", "fusion",
            fusion=Fusion(FUSION_PARTS, rerank_k=10, rerank_alpha=0.9)),
