@@ -97,6 +97,17 @@ def degraded(coll, fractions: dict[str, float], seed: int = 0):
     return out, labels
 
 
+def grid_settings(base):
+    """(name, Fusion) for every setting of the grid, from the default fusion ``base``."""
+    for (w, ow), (k, rk), (s, sc), (a, pw), (b, beta), (al, alpha) in itertools.product(
+            ORDER_WEIGHTS.items(), RERANK.items(), SCREEN.items(), POWER.items(), NORMALISATION.items(), ALPHA.items()):
+        if rk is None and (beta, alpha) != (0.0, 0.9):
+            continue  # without re-ranking the normalisation and alpha do nothing
+        yield (f"weights {w}; k {k}; screen {s}; agreement power {a}; normalisation {b}; alpha {al}",
+               replace(base, order_weights=ow, rerank_k=rk, screen=sc, agreement_power=pw, rerank_normalisation=beta,
+                       rerank_alpha=alpha))
+
+
 def nn_map(D, labels) -> tuple[float, float]:
     m = retrieval_metrics(D, labels).micro
     return float(m["nn"]), float(m["map"])
@@ -139,15 +150,7 @@ def main() -> None:
     # every setting on the collections where a choice may be made (both Watertight halves, their
     # hidden-like copies and the tune collections); the report collections only for the settings chosen
     choice_side = [n for n in colls if n.startswith("Watertight half")] + tune
-    grid = {}
-    for (w, ow), (k, rk), (s, sc), (a, pw), (b, beta), (al, alpha) in itertools.product(
-            ORDER_WEIGHTS.items(), RERANK.items(), SCREEN.items(), POWER.items(), NORMALISATION.items(), ALPHA.items()):
-        if rk is None and (beta, alpha) != (0.0, 0.9):
-            continue  # without re-ranking the normalisation and alpha do nothing
-        fusion = replace(base, order_weights=ow, rerank_k=rk, screen=sc, agreement_power=pw, rerank_normalisation=beta,
-                         rerank_alpha=alpha)
-        grid[f"weights {w}; k {k}; screen {s}; agreement power {a}; normalisation {b}; alpha {al}"] = (
-            fusion, evaluate(fusion, choice_side))
+    grid = {name: (fusion, evaluate(fusion, choice_side)) for name, fusion in grid_settings(base)}
 
     def margin(results, names):
         # the worst margin over the best part, in NN or mAP, whichever is smaller
