@@ -160,7 +160,7 @@ def main() -> None:
         # the best worst margin, up to MARGIN_TIE; among those, the best mean mAP (then the better margin)
         among = sorted(grid) if among is None else sorted(among)
         top = max(margin(grid[g][1], names) for g in among)
-        near = [g for g in among if margin(grid[g][1], names) >= top - MARGIN_TIE]
+        near = [g for g in among if margin(grid[g][1], names) >= top - MARGIN_TIE - 1e-9]  # one query is a tie
         return max(near, key=lambda g: (float(np.mean([grid[g][1][n][1] for n in names])), margin(grid[g][1], names)))
 
     def criterion(results, names):
@@ -177,8 +177,8 @@ def main() -> None:
                                                 **evaluate(grid[best][0], [n for n in shown_here
                                                                            if n not in grid[best][1]])}}
         print(f"selection {side} (chosen on {', '.join(names)}): {best}")
-    # the default: the setting both selections chose; when they differ, the best criterion pooled over
-    # both sides' tune collections (both Watertight halves and the tune collections)
+    # the default: the setting both selections chose; when they differ, the one `choose` prefers pooled
+    # over both sides' tune collections (both Watertight halves and the tune collections)
     pooled = sorted(set(out["selections"]["A"]["chosen_on"]) | set(out["selections"]["B"]["chosen_on"]))
     candidates = {out["selections"][side]["setting"] for side in "AB"}
     out["default_rule"] = choose(pooled, among=candidates)
@@ -192,6 +192,7 @@ def main() -> None:
     methods[f"{DEFAULT_METHOD} (default)"] = {n: nn_map(fused_matrix([colls[n][0][p] for p in base.parts], base),
                                                         colls[n][1]) for n in shown}
     out["methods"] = methods
+    out["default_at_run_time"] = repr(base)  # the "(default)" row's settings: the catalogue's when the script ran
     print("\n| method | " + " | ".join(shown) + " |\n|---|" + "---|" * len(shown))
     for m, res in methods.items():
         print(f"| {m} | " + " | ".join(f"{res[n][0]:.3f} / {res[n][1]:.3f}" for n in shown) + " |")
