@@ -166,6 +166,16 @@ def write_off(path: Path, V: np.ndarray, F: np.ndarray) -> None:
         np.savetxt(fh, np.c_[np.full(len(F), 3), F], fmt="%d")
 
 
+def write_member(out: Path, stem: str, cls: str, V: np.ndarray, F: np.ndarray, rng: np.random.Generator,
+                 open_fraction: float) -> str:
+    """One mesh of a collection: 1-3 holes cut with probability ``open_fraction`` (:func:`cut_holes`), written
+    as ``out/stem.off``; returns its row of labels.csv."""
+    if rng.random() < open_fraction:
+        V, F = cut_holes(V, F, rng, int(rng.integers(1, 4)))
+    write_off(out / f"{stem}.off", V, F)
+    return f"{stem}.off,{cls}"
+
+
 def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float, twins: bool = False,
           sizes: list[int] | None = None, subdivide: bool = False) -> int:
     """Write the collection into ``out`` (OFF files and labels.csv); returns the number of meshes.
@@ -192,10 +202,7 @@ def build(sources: list[Path], out: Path, *, seed: int, open_fraction: float, tw
                 U, G = pose(W, F, rng, n_tips=int(rng.integers(4, 7)), max_angle=110.0), F
                 if subdivide:
                     U, G = subdivided(U, G)
-                if rng.random() < open_fraction:
-                    U, G = cut_holes(U, G, rng, int(rng.integers(1, 4)))
-                write_off(out / f"{name}_{i:02d}.off", U, G)
-                rows.append(f"{name}_{i:02d}.off,{name}")
+                rows.append(write_member(out, f"{name}_{i:02d}", name, U, G, rng, open_fraction))
     (out / "labels.csv").write_text("\n".join(rows) + "\n")
     return len(rows) - 1
 

@@ -22,7 +22,7 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-from retrieval_collections import cut_holes, write_off
+from retrieval_collections import write_member
 
 import topomatch
 
@@ -38,10 +38,7 @@ def build(sources: Path, out: Path, *, open_fraction: float, seed: int) -> int:
     for path in files:
         mesh = topomatch.read_mesh(path)
         V, F = np.asarray(mesh.V, float), np.asarray(mesh.F, np.int64)
-        if rng.random() < open_fraction:
-            V, F = cut_holes(V, F, rng, int(rng.integers(1, 4)))
-        write_off(out / f"{path.stem}.off", V, F)
-        rows.append(f"{path.stem}.off,{path.name.split('-')[0].split('_')[0]}")
+        rows.append(write_member(out, path.stem, path.name.split("-")[0].split("_")[0], V, F, rng, open_fraction))
     (out / "labels.csv").write_text("\n".join(rows) + "\n")
     return len(rows) - 1
 
