@@ -63,7 +63,7 @@ def mesh_spectrum(mesh: Mesh, k: int, mass: Literal["full", "voronoi"] = "vorono
     lap = laplacian(mesh, mass)
     if lap.n < k + 2:
         raise StageError(f"{mesh.name}: spectrum needs k + 1 = {k + 1} eigenpairs but the mesh has {lap.n} "
-                         "vertices; lower spectrum.k")
+                         "vertices: too small for the spectral descriptors (in a config: lower spectrum.k)")
     try:
         pairs = smallest_eigenpairs(lap.Q, lap.K, k + 1, method="arpack")
     except StageError as exc:
