@@ -32,6 +32,7 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import Params, StageResult, stage
+from topomatch.stages.mesh.geometry import double_areas_and_sq_lengths
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.mesh.topology import HalfEdges, boundary_loops
 
@@ -117,23 +118,22 @@ def _simple_cycles(u: np.ndarray, w: np.ndarray) -> list[np.ndarray]:
 
 def _cap_geometry(V: np.ndarray, u: np.ndarray, w: np.ndarray, cycle: np.ndarray, apex: np.ndarray
                   ) -> np.ndarray:
-    """(k,) bool: cap triangles ``(w, u, apex[cycle])`` of the half-edges that are degenerate."""
-    a, b, c = V[w], V[u], apex[cycle]
-    double_area = np.linalg.norm(np.cross(b - a, c - a), axis=1)
-    longest = np.max([np.einsum("ij,ij->i", d, d) for d in (b - a, c - b, a - c)], axis=0)
-    return ~(double_area > DEGENERATE_CAP * longest)
+    """(k,) bool: cap triangles ``(w, u, apex[cycle])`` of the half-edges that are degenerate, measured as the
+    cotangent Laplacian measures them (:func:`~topomatch.stages.mesh.geometry.double_areas_and_sq_lengths`)."""
+    k = len(u)
+    corners = np.vstack([V[w], V[u], apex[cycle]])
+    sq, double_area = double_areas_and_sq_lengths(corners, np.arange(3 * k).reshape(3, k).T)
+    return ~(double_area > DEGENERATE_CAP * sq.max(axis=1))
 
 
 def _lifted(V: np.ndarray, u: np.ndarray, w: np.ndarray, edges: np.ndarray, centre: np.ndarray) -> np.ndarray:
     """The apex of one loop (its half-edges ``edges``) lifted off it: along the cap's vector area, else the
     normal of the loop's best-fit plane, by half the loop's RMS radius."""
-    P = V[u[edges]]
-    normal = np.cross(V[u[edges]] - centre, V[w[edges]] - centre).sum(axis=0)  # (w, u, c) caps: minus this
-    radius = float(np.sqrt(np.mean(np.sum((P - centre) ** 2, axis=1))))
+    P, Q = V[u[edges]] - centre, V[w[edges]] - centre
+    normal = np.cross(Q, P).sum(axis=0)  # twice the vector area of the caps (w, u, centre)
+    radius = float(np.sqrt(np.mean(np.sum(P ** 2, axis=1))))
     if not np.linalg.norm(normal) > 1e-9 * radius ** 2:
-        normal = np.linalg.svd(P - centre, full_matrices=True)[2][-1]
-    else:
-        normal = -normal
+        normal = np.linalg.svd(P, full_matrices=True)[2][-1]
     return centre + 0.5 * radius * normal / np.linalg.norm(normal)
 
 
