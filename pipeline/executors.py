@@ -13,6 +13,7 @@ parallelism, and BLAS threads on top of one process per core oversubscribe the c
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 import os
 import sys
@@ -173,6 +174,9 @@ def _dask(groups: Sequence[Sequence[Item]], cache_root: str | None,
         from dask.distributed import Client, LocalCluster, as_completed as dask_completed
     except ImportError as exc:  # pragma: no cover - dask is a dependency
         raise ConfigError(f"executor.kind=dask needs dask[distributed] ({exc})") from None
+    # distributed sets its loggers to INFO when imported: they follow the process's level instead (the CLI's
+    # -q / default / -v), so a quiet run stays quiet
+    logging.getLogger("distributed").setLevel(logging.getLogger().getEffectiveLevel())
     cluster = None
     if config.address:
         try:

@@ -70,6 +70,32 @@ def check_readable_file(path: str | Path) -> Path:
     return path
 
 
+def check_writable_folder(path: str | Path, *, create: bool = True) -> Path:
+    """``path`` as a Path, after checking that a file can be created in it: before a command computes what it
+    will write there, so that a folder it cannot write does not cost the result. ``create``: make the folder
+    (and its parents) when missing; else a missing folder is an error.
+
+    Raises
+    ------
+    InputError
+        Not a folder, or no file can be created in it; the message names the folder.
+    """
+    path = Path(path)
+    if create and not path.exists():
+        try:
+            path.mkdir(parents=True)
+        except OSError as exc:
+            raise InputError(path, f"cannot create this folder ({exc.strerror or exc})") from None
+    if not path.is_dir():
+        raise InputError(path, "not a folder to write into (a file is in the way)")
+    try:
+        with tempfile.TemporaryFile(dir=path):
+            pass
+    except OSError as exc:
+        raise InputError(path, f"cannot write into this folder ({exc.strerror or exc})") from None
+    return path
+
+
 def limit_from_env(name: str, default: int) -> int:
     """A size limit: the integer in the environment variable ``name``, else ``default`` (also when
     the variable is empty or not a whole number)."""

@@ -27,6 +27,7 @@ import numpy as np
 
 from topomatch.pipeline.config import Experiment, build_experiment
 from topomatch.pipeline.errors import ConfigError, InputError, StageError
+from topomatch.pipeline.files import check_writable_folder
 from topomatch.pipeline.item import ItemResult, run_item
 from topomatch.shape_index import Row, ShapeIndex
 from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, DEFAULT_PAIR_METHOD, Method, get_method
@@ -380,24 +381,35 @@ class Collection:
         with ShapeIndex(self.db, readonly=True) as store:
             return store.methods()
 
-    def _rows(self, method: str) -> list[Row]:
+    def _rows(self, method: str, asked: str | None = None) -> list[Row]:
+        """The ok rows of ``method`` (a part of ``asked``, default itself) with the current parameters; else a
+        :class:`ConfigError` saying what the index holds and what to do."""
+        asked = asked or method
         phash = params_of(method_experiment(method, []))[1]
         with ShapeIndex(self.db, readonly=True) as store:
             rows = store.rows(method, phash)
             if not rows:
                 present = store.methods()
                 listing = ", ".join(f"{m} ({n} ok)" for m, _, n in present) or "nothing"
-                stale = any(m == method for m, _, _ in present)
-                hint = (f"; its {method} rows were made with other parameters or stage versions: run topomatch index "
-                        f"again to update them") if stale else f"; index it with --method {method}"
-                raise ConfigError(f"{self.db}: no shapes indexed with method {method!r} and the current parameters "
+                whose = f"method {asked!r}" + (f" (its part {method!r})" if method != asked else "")
+                if any(m == method and h == phash for m, h, _ in present):
+                    hint = (f"; every mesh failed for {method} when indexed (the failures were listed then; "
+                            f"topomatch index --retry-failed recomputes them)")
+                elif any(m == method for m, _, _ in present):
+                    hint = (f"; its {method} rows were made with other parameters or stage versions: run topomatch "
+                            f"index again to update them")
+                else:
+                    usable = list(dict.fromkeys(m for m, _, n in present if n))
+                    hint = (f"; pass --method {' or '.join(usable)} to use what it holds, or index it with "
+                            f"--method {asked}" if usable else f"; index it with --method {asked}")
+                raise ConfigError(f"{self.db}: no shapes indexed for {whose} with the current parameters "
                                   f"(the index has: {listing}){hint}")
         return rows
 
     def parts(self, method: str) -> tuple[list[Row], dict[str, list[Descriptor]]]:
         """Index rows present for every part of ``method`` (same order), and {part: descriptors}."""
         parts = get_method(method).parts
-        indexed = {part: self._rows(part) for part in parts}
+        indexed = {part: self._rows(part, method) for part in parts}
         common = set.intersection(*({r.path for r in rows} for rows in indexed.values()))
         rows = [r for r in indexed[parts[0]] if r.path in common]
         descriptors = {}
@@ -538,14 +550,15 @@ class Collection:
         rows, descriptors = self.parts(method)
         keep = [i for i, r in enumerate(rows) if r.label]
         if len(keep) < 2:
-            raise ConfigError(f"{self.db}: fewer than two labelled shapes for {method}; index with --labels")
+            raise ConfigError(f"{self.db}: fewer than two labelled shapes for {method}; index with --labels (a labels "
+                              f"file labels the meshes whose paths, relative to the file's folder, it lists: index "
+                              f"warns about rows that match no mesh)")
         rows = [rows[i] for i in keep]
         labels = np.array([r.label for r in rows])
         path = Path(out) if out else self.db.with_suffix(f".{method}.npz")
         if path.suffix != ".npz":  # numpy would add it: name the file that is written
             path = path.with_name(path.name + ".npz")
-        if not path.parent.is_dir():  # before the matrix is computed, not after
-            raise InputError(path.parent, "not a folder to write the matrix into")
+        check_writable_folder(path.parent, create=False)  # before the matrix is computed, not after
         sizes = {c: int((labels == c).sum()) for c in set(labels)}
         if max(sizes.values()) < PSB_CUTOFF + 1:
             raise InputError(self.db, f"no class has {PSB_CUTOFF + 1} or more labelled shapes (largest: "

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from topomatch.pipeline.errors import TopomatchError
+from topomatch.pipeline.errors import ConfigError, TopomatchError
 
 Check = Callable[[Path], tuple[str, str]]
 
@@ -299,7 +299,7 @@ def reproduce(out: str | Path = "thesis", *, data_root: str | Path | None = None
     out = Path(out)
     items = [i for i in CATALOGUE if not only or any(_matches(i, s) for s in only)]
     if not items:
-        raise TopomatchError(f"no thesis figure or table matches {', '.join(only or [])}; ids look like "
+        raise ConfigError(f"no thesis figure or table matches {', '.join(only or [])}; ids look like "
                              f"'Fig. 3.9', '3.9' or 'Table 3.1', configs like 'robustness/noise'")
     runs: dict[str, tuple[Path | None, str]] = {}
     for config in dict.fromkeys(i.config for i in items):

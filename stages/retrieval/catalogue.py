@@ -154,6 +154,6 @@ def get_method(name: str) -> Method:
         raise ConfigError(f"unknown retrieval method {name!r}; methods: {', '.join(METHODS)}") from None
 
 
-def help_text() -> str:
-    """One line per method, for ``--help``."""
-    return "; ".join(f"{m.name}: {m.title}" for m in METHODS.values())
+def help_text(names: list[str] | None = None) -> str:
+    """One line per method (of ``names``, default all), for ``--help``."""
+    return "; ".join(f"{m.name}: {m.title}" for m in METHODS.values() if names is None or m.name in names)

@@ -90,4 +90,4 @@ class MatchOptions(Params):
     unmatched_cost: float = Field(ge=0, allow_inf_nan=False, description="added per endpoint left without a partner "
                                   "(each method's default is in its catalogue record)")
     endpoint_window: int | None = Field(None, ge=0, description="only compare skeletons whose endpoint "
-                                        "counts differ by at most this (thesis indexing: 2-3); none = all")
+                                        "counts differ by at most this (thesis indexing: 2-3); left out, all are compared")

@@ -315,11 +315,12 @@ def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], f
     A = np.zeros((n + 1, n + 1))
     A[:n, :n] = fuse(mats, scales, fusion.order_weights)
     A[n, :n] = A[:n, n] = row
-    score = 1.0 - manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha,
-                                       fusion.rerank_normalisation)[:n]  # the query's own node left out
-    if not score.max() > 0:  # the query is cut off from the graph: rank by the fused dissimilarities
+    # the row of the query's node over the whole graph, the query's own node included in the maximum (as in
+    # manifold_ranking): the first match is 0 only when it scores like the query itself (the cosine of the
+    # diffusion states is 1 with the default normalisation), not whenever it is the best of the database
+    out = manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha, fusion.rerank_normalisation)[:n]
+    if not (out < 1.0).any():  # the query is cut off from the graph: rank by the fused dissimilarities
         return row
-    out = 1.0 - score / score.max()  # 0 for the best database match
     # a database item identical to the query in every kept part comes first: on a small graph the
     # diffusion can score a well-connected neighbour above it
     same = row == 0

@@ -90,7 +90,7 @@ def test_index_open_query_evaluate(tmp_path):
     collection = topomatch.open_index(tmp_path / "s.db")
     q = collection.query(paths[2], k=2, method="d2")
     assert q.indexed == 4 and q.results[0]["path"] == str(paths[2].resolve()) and q.results[0]["dissimilarity"] == 0
-    with pytest.raises(topomatch.ConfigError, match="no shapes indexed with method 'hks'"):
+    with pytest.raises(topomatch.ConfigError, match="no shapes indexed for method 'hks'"):
         collection.query(paths[2], method="hks")
 
 

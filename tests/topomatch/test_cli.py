@@ -135,3 +135,17 @@ def test_a_closed_stdout_pipe_ends_the_command_quietly():
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 141
     assert b"Traceback" not in err and b"Broken pipe" not in err
+
+
+def test_python_warnings_read_as_the_commands_own(capsys):
+    # the command shows a Python warning (e.g. a cache entry it recomputes) as `topomatch: warning: ...`, hidden
+    # by -q, with its source only under -vv
+    from topomatch.cli import _show_warning, common
+
+    message = UserWarning("cache entry x.npz is unusable (bad zip); recomputing")
+    for level, expected in ((0, f"topomatch: warning: {message}\n"), (-1, ""),
+                            (2, f"topomatch: warning: {message} (UserWarning at cache.py:73)\n")):
+        common.reset(level)
+        _show_warning(message, UserWarning, "cache.py", 73)
+        assert capsys.readouterr().err == expected
+    common.reset(0)

@@ -164,9 +164,14 @@ def test_fused_topomatch_method(collection, tmp_path, capsys, monkeypatch):
     assert max(fusion["agreement"].values()) <= 1 and fusion["rerank_k"] == rerank_neighbours(default, 6)
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "topomatch-equal", "--out", tmp_path / "E.npz")
     assert code == 0 and "fusion: kept agd, hks, shapedna, d2, sh; part agreement not measured" in out
-    # a fusion needs an index: match explains and exits 2
-    code, _, err = run(capsys, "match", collection / "torus.off", collection / "torus.off", "--method", "topomatch")
-    assert code == 2 and "fused method" in err and "agd" in err
+    # a fusion needs an index: match does not offer it (usage error, 2)
+    with pytest.raises(SystemExit) as usage:
+        run(capsys, "match", collection / "torus.off", collection / "torus.off", "--method", "topomatch")
+    assert usage.value.code == 2 and "invalid choice: 'topomatch'" in capsys.readouterr().err
+    # a shape that is not in the index is not at 0 from its first match (the values say how far, not only the rank)
+    code, out, _ = run(capsys, "query", BUNDLED_MESHES / "odedstein_cat-low-resolution.obj.gz", "--db", db, "--json")
+    first = json.loads(out)["results"][0]
+    assert code == 0 and 0.0 < first["dissimilarity"] < 1.0
 
 
 def test_index_reports_open_and_multi_component_meshes(tmp_path, capsys):
@@ -187,8 +192,8 @@ def test_index_reports_open_and_multi_component_meshes(tmp_path, capsys):
     write("two.off", two.V, two.F)
     code, out, _ = run(capsys, "index", folder, "--db", tmp_path / "i.db", "--method", "shapedna", "--no-progress")
     assert code == 0 and "3 indexed, 0 failed" in out
-    assert "1 mesh is open (with boundaries)" in out and "holes were capped" in out
-    assert "1 mesh has several components: the largest was indexed" in out
+    assert "1 mesh is open (with boundaries; " in out and "open.off): " in out and "holes were capped" in out
+    assert "1 mesh has several components (" in out and "two.off): the largest was indexed" in out
 
 
 def test_shortlisted_query_ranks_as_the_exact_fusion_without_re_ranking(collection, tmp_path, capsys):
@@ -233,3 +238,48 @@ def test_matching_options_on_a_method_without_endpoints_are_flagged(collection, 
     run(capsys, "index", collection, "--db", db, "--method", "d2", "--workers", "1", "--no-progress")
     code, _, err = run(capsys, "query", collection / "torus.off", "--db", db, "--method", "d2", "--unmatched-cost", "1")
     assert code == 0 and "--unmatched-cost apply to skeleton-endpoint matching; d2 has no endpoint part" in err
+
+
+def test_shapes_without_endpoints_are_flagged_by_the_endpoint_methods(capsys):
+    # the torus and the double torus have skeletons without endpoints: srg puts them at 0 from each other,
+    # and says why instead of printing a 0 that reads as "the same shape"
+    code, out, err = run(capsys, "match", BUNDLED_MESHES / "torus.off", BUNDLED_MESHES / "eight_genus2.off",
+                         "--method", "srg")
+    assert code == 0 and "dissimilarity (srg): 0" in out
+    assert err.count("skeleton has no endpoints") == 2 and "torus.off" in err and "eight_genus2.off" in err
+    code, _, err = run(capsys, "-q", "match", BUNDLED_MESHES / "torus.off", BUNDLED_MESHES / "eight_genus2.off",
+                       "--method", "srg")
+    assert code == 0 and err == ""
+
+
+def test_index_of_another_method_and_small_classes_are_explained(collection, tmp_path, capsys):
+    db = tmp_path / "d2.db"
+    labels = tmp_path / "labels.csv"  # three shapes in one class, one alone: PSB evaluates three queries
+    labels.write_text("relative_path,class\nmeshes/torus.off,a\nmeshes/eight_genus2.off,a\n"
+                      "meshes/odedstein_hand_lowres.obj.gz,a\nmeshes/odedstein_human_man.obj.gz,b\n")
+    files = [collection / n for n in ("torus.off", "eight_genus2.off", "odedstein_hand_lowres.obj.gz",
+                                      "odedstein_human_man.obj.gz")]
+    code, _, _ = run(capsys, "index", *files, "--db", db, "--method", "d2", "--labels", labels, "--no-progress")
+    assert code == 0
+    code, _, err = run(capsys, "query", files[0], "--db", db)  # the default method, which this index does not hold
+    assert code == 2 and "no shapes indexed for method 'topomatch'" in err and "pass --method d2" in err
+    code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "d2", "--out", tmp_path / "D.npz")
+    assert code == 0 and "3 of the 4 shapes are evaluated as queries" in out
+
+
+def test_an_output_folder_that_cannot_be_written_is_refused_before_the_work(collection, tmp_path, capsys, monkeypatch):
+    from topomatch.retrieval import Collection
+
+    db = tmp_path / "d2.db"
+    run(capsys, "index", collection, "--db", db, "--method", "d2", "--labels", collection / "labels.csv",
+        "--no-progress")
+    blocker = tmp_path / "a_file"
+    blocker.write_text("not a folder")
+    monkeypatch.setattr(Collection, "part_matrices", lambda *a, **k: pytest.fail("computed before the check"))
+    code, _, err = run(capsys, "evaluate", "--db", db, "--method", "d2", "--out", blocker / "D.npz")
+    assert code == 1 and "a_file: not a folder to write into" in err
+    from topomatch import skeletons
+
+    monkeypatch.setattr(skeletons, "skeleton_with", lambda *a, **k: pytest.fail("computed before the check"))
+    code, _, err = run(capsys, "skeleton", collection / "torus.off", "--out", blocker / "sk")
+    assert code == 1 and "sk: cannot create this folder" in err

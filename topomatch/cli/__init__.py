@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import warnings
 
 from topomatch import __version__
 from topomatch.cli import common, engine, registration, retrieval, skeleton, thesis
@@ -102,8 +103,16 @@ def _silence_stdout() -> None:
         pass
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Python warnings (e.g. a cache entry that cannot be read) as the CLI's own: ``topomatch: warning: ...``,
+    hidden by ``-q``; the source line only with ``-vv``."""
+    where = f" ({category.__name__} at {filename}:{lineno})" if common.verbosity() >= 2 else ""
+    common.warn(f"{message}{where}")
+
+
 def main(argv: list[str] | None = None) -> int:
-    if argv is None:  # the command (not a call from Python): large numpy temporaries reuse freed memory
+    command_line = argv is None
+    if command_line:  # the command (not a call from Python): large numpy temporaries reuse freed memory
         keep_freed_memory()
     argv = sys.argv[1:] if argv is None else list(argv)
     Parser.json_errors = "--json" in argv
@@ -112,6 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     common.reset(level)
     logging.basicConfig(format="topomatch: %(levelname)s: %(name)s: %(message)s",
                         level={-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO}.get(level, logging.DEBUG))
+    if command_line:  # not in a caller's process (a test recording warnings keeps Python's own display)
+        warnings.showwarning = _show_warning
     try:
         return args.handler(args)
     except BrokenPipeError:  # the reader of stdout left (`topomatch ... --json | head`): stop quietly

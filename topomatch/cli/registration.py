@@ -23,6 +23,7 @@ import argparse
 from topomatch.cli.common import command, path_argument, print_result
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 from topomatch.pipeline.errors import TopomatchError
+from topomatch.pipeline.files import check_writable_folder
 
 
 class RegistrationFlagged(TopomatchError):
@@ -58,8 +59,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                                  "MetaImage, NRRD")
     p.add_argument("moving", help="moving (target) image or volume")
     add_options(p, _models(), _options())
-    p.add_argument("--out", type=path_argument, metavar="DIR", help="write moving_resampled.png/.tif (3D: the moving volume "
-                   "resampled on the fixed grid, and transform.tfm), overlay.png and registration.json")
+    p.add_argument("--out", type=path_argument, metavar="DIR", help="write the moving image resampled on the fixed grid "
+                   "(moving_resampled.png and .tif; 3D: in the moving file's format), transform.tfm, overlay.png and "
+                   "registration.json")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 
@@ -71,6 +73,8 @@ def cmd_register(args: argparse.Namespace) -> int:
         write_volume_registration_files,
     )
 
+    if args.out:
+        check_writable_folder(args.out)  # before the registration runs, not after
     outcome = register_with(args.fixed, args.moving, given_options(args, _models(), _options()))
     summary = outcome.to_dict()
     volumes = isinstance(outcome, VolumeRegistrationOutcome)

@@ -34,15 +34,19 @@ def _match_options() -> list[Option]:
     return [Option("match.correspondence", default_help="greedy"),
             Option("match.dissimilarity", default_help="matched"),
             Option("match.unmatched_cost", default_help=f"the method's own: {costs}"),
-            Option("match.endpoint_window", default_help="none, compare all")]
+            Option("match.endpoint_window", default_help="all")]
 
 
-def _method_arg(p: argparse.ArgumentParser, default: str) -> None:
+def _method_arg(p: argparse.ArgumentParser, default: str, *, fusions: bool = True) -> None:
+    """``--method``: every method of the catalogue, or (``fusions=False``, for ``match``) the single ones."""
     from topomatch.stages.retrieval.catalogue import METHODS, help_text
 
-    choices = list(METHODS)
+    choices = [name for name, m in METHODS.items() if fusions or m.fusion is None]
+    left_out = [name for name in METHODS if name not in choices]
     p.add_argument("--method", default=default, choices=choices,
-                   help=f"retrieval method (default {default}). {help_text()}")
+                   help=f"retrieval method (default {default}). {help_text(choices)}" + (
+                       f" ({', '.join(left_out)}: fusions, whose scales come from a collection; use index and query)"
+                       if left_out else ""))
 
 
 def _with_match_options(p: argparse.ArgumentParser) -> None:
@@ -90,7 +94,7 @@ def _match_arguments(p: argparse.ArgumentParser) -> None:
 
     p.add_argument("a", help="first mesh")
     p.add_argument("b", help="second mesh")
-    _method_arg(p, DEFAULT_PAIR_METHOD)
+    _method_arg(p, DEFAULT_PAIR_METHOD, fusions=False)  # a fusion's scales come from a collection
     _with_match_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
 
@@ -139,6 +143,9 @@ def cmd_match(args: argparse.Namespace) -> int:
         print_json(out)
     else:
         print(f"dissimilarity ({args.method}): {result.dissimilarity:.6g}")
+        for mesh, count in ((args.a, result.n_endpoints_a), (args.b, result.n_endpoints_b)):
+            if count == 0:
+                warn(_no_endpoints(mesh, args.method))
         if result.correspondence is not None:
             print(f"endpoints: {result.n_endpoints_a} vs {result.n_endpoints_b}")
             for pair in result.correspondence:
@@ -173,21 +180,16 @@ def cmd_index(args: argparse.Namespace) -> int:
             print(f"{report.removed} rows of files no longer in the indexed folders were removed")
         if report.unmatched_labels:
             n = len(report.unmatched_labels)
-            shown = ", ".join(report.unmatched_labels[:3]) + (", ..." if n > 3 else "")
             print(f"{args.labels}: {n} labelled {'paths are' if n > 1 else 'path is'} no mesh file of this run "
-                  f"(misspelt, missing or not given): {shown}", file=sys.stderr)
+                  f"(misspelt, missing or not given): {_some(report.unmatched_labels)}", file=sys.stderr)
         if report.open_meshes:
-            from topomatch.stages.retrieval.catalogue import get_method
-
             n = len(report.open_meshes)
-            capped = any("fill_holes" in get_method(p).chain for p in get_method(report.method).parts)
-            print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries): " + (
-                "their holes were capped (a fan to each boundary loop's centroid) for the spectrum, heat kernel "
-                "and skeleton; D2 and spherical harmonics see them as they are" if capped else
-                "the spectrum, heat kernel and skeleton use natural (Neumann) boundary conditions"))
+            print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries; {_some(report.open_meshes)}): "
+                  + _open_meshes_note(report.method))
         if report.multi_component_meshes:
             n = len(report.multi_component_meshes)
-            print(f"{n} {'meshes have' if n > 1 else 'mesh has'} several components: the largest was indexed")
+            print(f"{n} {'meshes have' if n > 1 else 'mesh has'} several components "
+                  f"({_some(report.multi_component_meshes)}): the largest was indexed")
         for part in report.parts:
             for reason in part.failures:
                 print(f"  failed ({part.method}): {reason}", file=sys.stderr)
@@ -197,10 +199,39 @@ def cmd_index(args: argparse.Namespace) -> int:
     return 0
 
 
+def _no_endpoints(mesh: str, method: str) -> str:
+    """The warning for a mesh whose skeleton has no endpoints, compared by an endpoint method."""
+    return (f"{mesh}: its {method} skeleton has no endpoints (a cycle or a single node after pruning), so its "
+            f"{method} dissimilarity only charges the other shape's unmatched endpoints: every shape without "
+            "endpoints is at 0 from it; the descriptor methods (hks, shapedna; topomatch on a collection) tell such "
+            "shapes apart")
+
+
+def _some(paths: list[str], shown: int = 3) -> str:
+    """The first ``shown`` of ``paths``, then "..." when there are more."""
+    return ", ".join(paths[:shown]) + (", ..." if len(paths) > shown else "")
+
+
+def _open_meshes_note(method: str) -> str:
+    """What ``method``'s parts do with a mesh's boundaries."""
+    from topomatch.stages.retrieval.catalogue import get_method
+
+    parts = [get_method(p) for p in get_method(method).parts]
+    if any("fill_holes" in m.chain for m in parts):
+        return ("their holes were capped (a fan to each boundary loop's centroid) for the spectrum, heat kernel and "
+                "skeleton; D2 and spherical harmonics see them as they are")
+    if all(m.name in ("d2", "sh") for m in parts):
+        return "their surface is sampled as it is"
+    return "the Laplacian and the skeleton use natural (Neumann) boundary conditions"
+
+
 def cmd_query(args: argparse.Namespace) -> int:
     from topomatch.retrieval import open_index
+    from topomatch.stages.retrieval.catalogue import get_method
 
     result = open_index(args.db).query(args.mesh, k=args.k, method=args.method, options=_given(args))
+    if result.n_endpoints == 0 and get_method(args.method).kind == "endpoints":
+        warn(_no_endpoints(args.mesh, args.method))
     if args.json:
         print_json(result.to_dict())
     else:
@@ -216,6 +247,7 @@ def cmd_query(args: argparse.Namespace) -> int:
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
     from topomatch.retrieval import open_index
+    from topomatch.stages.retrieval.metrics import PSB_CUTOFF
 
     ev = open_index(args.db).evaluate(method=args.method, options=_given(args), out=args.out)
     if args.json:
@@ -223,6 +255,10 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     else:
         print(ev.metrics.table(args.method))
         print(f"{ev.n} shapes; matrix ({ev.matrix_seconds:.2f} s) written to {ev.matrix}")
+        evaluated = int(ev.metrics.evaluated.sum())
+        if evaluated < ev.n:
+            print(f"{evaluated} of the {ev.n} shapes are evaluated as queries: the others are in classes of fewer than "
+                  f"{PSB_CUTOFF + 1} shapes, which PSB leaves out of the averages (they still count as answers)")
         if ev.fusion is not None:
             print(fusion_line(ev.fusion, args.method))
     return 0

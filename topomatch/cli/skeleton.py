@@ -12,6 +12,7 @@ import argparse
 
 from topomatch.cli.common import command, path_argument, print_result, warn
 from topomatch.pipeline.cli_options import add_options, given_options
+from topomatch.pipeline.files import check_writable_folder
 
 
 def _models() -> dict:
@@ -58,6 +59,10 @@ def _formats(text: str) -> list[str]:
 def cmd_skeleton(args: argparse.Namespace) -> int:
     from topomatch.skeletons import SKELETON_OPTIONS, skeleton_with, write_skeleton_files
 
+    if args.out:
+        check_writable_folder(args.out)  # before the skeleton is computed, not after
+    elif args.formats != ["ply"]:
+        warn("--format applies to the files of --out, which is not given: no files are written")
     result = skeleton_with(args.mesh, given_options(args, _models(), SKELETON_OPTIONS))
     summary = result.to_dict()
     if args.out:

@@ -83,6 +83,21 @@ def test_one_row_ranks_as_the_full_ranking():
                 assert r[i] == pytest.approx(0.0)
 
 
+def _query_graph(X, q, parts, fusion):
+    """A query point q among the points X (n, d): its parts' rows (Euclidean, city-block), the fusion's
+    decision for the (n + 1)-item graph, and that graph's fused (n + 1, n + 1) matrix, the query last."""
+    from topomatch.stages.retrieval.fusion import decide, kept_scales
+
+    n = len(X)
+    rows = [cdist(q[None], X)[0], cdist(q[None], X, "cityblock")[0]]
+    decision = decide(parts, fusion, graph_size=n + 1)
+    scales = kept_scales(parts, fusion, decision)
+    A = np.zeros((n + 1, n + 1))
+    A[:n, :n] = fuse(parts, scales, fusion.order_weights)
+    A[n, :n] = A[:n, n] = fuse(rows, scales, fusion.order_weights)
+    return rows, decision, A
+
+
 def test_the_fusions_rank_with_the_normalisation_they_name():
     # fused_matrix and fused_query re-rank by manifold ranking with the fusion's beta (module docstring),
     # and beta changes the ranking of a collection with classes of uneven size and density
@@ -102,16 +117,27 @@ def test_the_fusions_rank_with_the_normalisation_they_name():
         tops[beta] = [tuple(np.argsort(R[i], kind="stable")[:5]) for i in range(n)]
         # one query (a point between two classes): its row of the (n + 1)-item graph
         q = (X[1] + X[10]) / 2
-        rows = [cdist(q[None], X)[0], cdist(q[None], X, "cityblock")[0]]
-        query_decision = decide(parts, fusion, graph_size=n + 1)
-        scales = kept_scales(parts, fusion, query_decision)
-        A = np.zeros((n + 1, n + 1))
-        A[:n, :n] = fuse(parts, scales, fusion.order_weights)
-        A[n, :n] = A[:n, n] = fuse(rows, scales, fusion.order_weights)
-        g = 1 - manifold_ranking_row(A, n, query_decision.rerank_k, 0.9, beta)[:n]
+        rows, query_decision, A = _query_graph(X, q, parts, fusion)
         d = fused_query(rows, parts, fusion, query_decision)
-        np.testing.assert_allclose(d, 1 - g / g.max(), atol=1e-12)
+        np.testing.assert_allclose(d, manifold_ranking_row(A, n, query_decision.rerank_k, 0.9, beta)[:n], atol=1e-12)
     assert sum(a != b for a, b in zip(tops[0.0], tops[1.0])) >= 3
+
+
+def test_a_query_gets_the_values_the_collection_matrix_would_give_it():
+    # with the default normalisation (beta = 1/2) a query's re-ranked values are its row of the (n + 1)-item
+    # matrix, 1 - the cosine of the diffusion states: its first match is 0 only for a duplicate, not whenever
+    # it is the database's best (the values said how far a match is, not only its rank)
+    X = _uneven(1)
+    parts = [cdist(X, X), cdist(X, X, "cityblock")]
+    n = len(X)
+    fusion = Fusion(("a", "b"), "auto", 0.95, order_weights=(1, 1), rerank_normalisation=0.5)
+    for q in ((X[1] + X[10]) / 2, X[3] + 0.05, X[3]):
+        rows, decision, A = _query_graph(X, q, parts, fusion)
+        d = fused_query(rows, parts, fusion, decision)
+        duplicate = rows[0] == 0  # put first at 0 by fused_query (the diffusion need not score it first)
+        np.testing.assert_allclose(d[~duplicate], manifold_ranking(A, decision.rerank_k, 0.95, 0.5)[n, :n][~duplicate],
+                                   atol=1e-12)
+        assert (d[duplicate] == 0).all() and (d[~duplicate] > 1e-9).all()
 
 
 def test_half_normalised_scores_are_cosines_of_the_diffusion_states():
