@@ -29,7 +29,8 @@ class Skeleton:
     """The skeleton of one mesh, with the counts ``topomatch skeleton --json`` prints.
 
     The JSON fields (:meth:`to_dict`) are ``mesh`` (the input's name), ``function``, ``levels``,
-    ``n_vertices``, ``n_faces`` (of the cleaned mesh), ``genus``, ``n_nodes``, ``n_edges``,
+    ``n_vertices``, ``n_faces`` (of the cleaned mesh), ``genus``, ``n_boundary_loops`` (0 for a closed mesh; an open
+    one's Laplacian has natural, Neumann, boundary conditions), ``n_nodes``, ``n_edges``,
     ``n_endpoints``, ``cycle_rank``, ``reeb_nodes``, ``removed_branches`` (pruning), ``lambda2``
     (Fiedler function only, else None), ``seconds`` (per stage) and ``warnings`` (what makes the
     result doubtful, e.g. a non-manifold mesh; empty when nothing does). Besides them: ``graph`` (the
@@ -45,6 +46,7 @@ class Skeleton:
     n_vertices: int
     n_faces: int
     genus: int
+    n_boundary_loops: int
     n_nodes: int
     n_edges: int
     n_endpoints: int
@@ -62,8 +64,8 @@ class Skeleton:
     item: ItemResult = field(repr=False)
 
     #: The fields printed by ``--json``, in order.
-    JSON_FIELDS = ("mesh", "function", "levels", "n_vertices", "n_faces", "genus", "n_nodes", "n_edges",
-                   "n_endpoints", "cycle_rank", "reeb_nodes", "removed_branches", "lambda2", "seconds",
+    JSON_FIELDS = ("mesh", "function", "levels", "n_vertices", "n_faces", "genus", "n_boundary_loops", "n_nodes",
+                   "n_edges", "n_endpoints", "cycle_rank", "reeb_nodes", "removed_branches", "lambda2", "seconds",
                    "warnings")
 
     def to_dict(self) -> dict[str, Any]:
@@ -135,7 +137,7 @@ def skeleton_with(mesh: Mesh | str | Path, overrides: dict[str, dict[str, Any]])
                         f"clean: {{fail_on_nonmanifold: true}} refuses such meshes)")
     return Skeleton(
         mesh=name, function=morse.function.kind, levels=level_sets.level_sets.n_levels,
-        n_vertices=used.n_vertices, n_faces=used.n_faces, genus=r["clean"].after.genus,
+        n_vertices=used.n_vertices, n_faces=used.n_faces, genus=after.genus, n_boundary_loops=after.n_boundary_loops,
         n_nodes=pruned.graph.number_of_nodes(), n_edges=pruned.graph.number_of_edges(),
         n_endpoints=len(pruned.endpoints), cycle_rank=reeb.cycle_rank, reeb_nodes=reeb.n_nodes,
         removed_branches=pruned.removed_branches, lambda2=morse.function.info.get("lambda2"),

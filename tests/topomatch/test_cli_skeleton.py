@@ -25,7 +25,7 @@ def skeleton_json(capsys, *args):
 def test_json_fields(capsys, name, genus):
     code, out, _ = skeleton_json(capsys, BUNDLED_MESHES / name, "--function", "mixture", "--levels", "40")
     assert code == 0 and REQUIRED <= set(out)
-    assert out["genus"] == genus and out["cycle_rank"] == genus
+    assert out["genus"] == genus and out["cycle_rank"] == genus and out["n_boundary_loops"] == 0
     assert set(out["seconds"]) == {"load", "clean", "morse", "level_sets", "reeb_graph", "prune"}
     assert out["lambda2"] is None
 
@@ -76,8 +76,15 @@ def test_multi_component_mesh_uses_the_largest(capsys, tmp_path):
 
 
 def test_open_mesh_works(capsys):
-    code, out, _ = skeleton_json(capsys, BUNDLED_MESHES / "odedstein_hand_lowres.obj.gz", "--function", "height")
+    import igl
+
+    from topomatch.meshes import read_mesh
+
+    path = BUNDLED_MESHES / "odedstein_hand_lowres.obj.gz"
+    code, out, _ = skeleton_json(capsys, path, "--function", "height")
     assert code == 0 and out["genus"] == 0 and out["n_endpoints"] >= 2
+    loops = igl.boundary_loop_all(np.asarray(read_mesh(path).F))  # libigl's count of the open mesh's boundary loops
+    assert out["n_boundary_loops"] == len(loops) >= 1
 
 
 def test_degenerate_faces_are_cleaned(capsys, tmp_path):
