@@ -84,7 +84,9 @@ def depth_buffer_descriptor(V: np.ndarray, F: np.ndarray) -> np.ndarray:
 
 
 def k_reciprocal(D: np.ndarray, k1: int, k2: int, lam: float) -> np.ndarray:
-    """(n, n) k-reciprocal re-ranking of the dissimilarities D (n, n) (Zhong et al. 2017, without the query/gallery split)."""
+    """(n, n) k-reciprocal re-ranking of the dissimilarities D (n, n) (Zhong et al. 2017, without the query/gallery
+    split). D is used as it is, divided by its maximum (the paper squares Euclidean feature distances and
+    normalises per column; a fused dissimilarity is neither)."""
     n = len(D)
     D = D / D.max()
     order = np.argsort(D, axis=1, kind="stable")
@@ -103,7 +105,7 @@ def k_reciprocal(D: np.ndarray, k1: int, k2: int, lam: float) -> np.ndarray:
         W[i, R] = w / w.sum()
     if k2 > 1:
         W = W[order[:, :k2]].mean(axis=1)
-    shared = np.minimum(W[:, None, :], W[None, :, :]).sum(axis=2)
+    shared = np.stack([np.minimum(W[i], W).sum(axis=1) for i in range(n)])  # row by row: (n, n), not (n, n, n)
     return (1.0 - lam) * (1.0 - shared / (2.0 - shared)) + lam * D
 
 

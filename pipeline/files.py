@@ -71,28 +71,31 @@ def check_readable_file(path: str | Path) -> Path:
 
 
 def check_writable_folder(path: str | Path, *, create: bool = True) -> Path:
-    """``path`` as a Path, after checking that a file can be created in it: before a command computes what it
-    will write there, so that a folder it cannot write does not cost the result. ``create``: make the folder
-    (and its parents) when missing; else a missing folder is an error.
+    """``path`` as a Path, after checking that files can be written there: before a command computes what it
+    will write, so that a folder it cannot write does not cost the result. Nothing is created: with
+    ``create`` (the writers make the folder later) a missing folder is checked through its nearest existing
+    parent; without it, a missing folder is an error.
 
     Raises
     ------
     InputError
-        Not a folder, or no file can be created in it; the message names the folder.
+        No such folder (``create=False``), a file in the way, or no file can be created there; the message
+        names the folder.
     """
     path = Path(path)
-    if create and not path.exists():
-        try:
-            path.mkdir(parents=True)
-        except OSError as exc:
-            raise InputError(path, f"cannot create this folder ({exc.strerror or exc})") from None
-    if not path.is_dir():
-        raise InputError(path, "not a folder to write into (a file is in the way)")
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if existing != path and not create:
+        raise InputError(path, "no such folder to write into")
+    where = "" if existing == path else f": {existing}"
+    if not existing.is_dir():
+        raise InputError(path, f"not a folder to write into (a file is in the way{where})")
     try:
-        with tempfile.TemporaryFile(dir=path):
+        with tempfile.TemporaryFile(dir=existing):
             pass
     except OSError as exc:
-        raise InputError(path, f"cannot write into this folder ({exc.strerror or exc})") from None
+        raise InputError(path, f"cannot write into this folder{where} ({exc.strerror or exc})") from None
     return path
 
 

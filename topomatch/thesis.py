@@ -298,8 +298,9 @@ def reproduce(out: str | Path = "thesis", *, data_root: str | Path | None = None
 
     out = Path(out)
     items = [i for i in CATALOGUE if not only or any(_matches(i, s) for s in only)]
-    if not items:
-        raise ConfigError(f"no thesis figure or table matches {', '.join(only or [])}; ids look like "
+    unknown = [s for s in only or [] if not any(_matches(i, s) for i in CATALOGUE)]
+    if unknown:  # every selector must name something, not only one of them
+        raise ConfigError(f"no thesis figure or table matches {', '.join(unknown)}; ids look like "
                              f"'Fig. 3.9', '3.9' or 'Table 3.1', configs like 'robustness/noise'")
     runs: dict[str, tuple[Path | None, str]] = {}
     for config in dict.fromkeys(i.config for i in items):

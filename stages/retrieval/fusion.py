@@ -304,25 +304,32 @@ def fused_query(query_rows: list[np.ndarray], part_matrices: list[np.ndarray], f
     re-ranking: the query joins the database's graph as an (n + 1)-th item). The screening looks at
     the database alone, so every query of a database uses the same parts: pass ``decision``
     (``decide(part_matrices, fusion, graph_size=n + 1)``) to compute it once for many queries.
+
+    Values: with re-ranking, the query's row of :func:`manifold_ranking_row` on the (n + 1)-item graph,
+    ``1 - G_qj / max_i G_qi`` over every item, the query's own node included (with beta = 1/2, one minus the
+    cosine of the diffusion states, the entry :func:`manifold_ranking` would give); items the diffusion does
+    not reach (1: no path in the neighbour graph, or a score below round-off) follow every reached one, ranked
+    by their fused dissimilarity f as ``1 + f / (1 + f)`` in [1, 2); an item at fused dissimilarity 0 (as close
+    as can be in the parts the order weights read) is 0 and comes first. Without re-ranking (no ``rerank_k``,
+    or a database of one shape): the fused dissimilarities.
     """
     n = len(query_rows[0])
     decision = decision or decide(part_matrices, fusion, graph_size=n + 1)
     rows, mats = _kept(query_rows, fusion, decision), _kept(part_matrices, fusion, decision)
     scales = kept_scales(part_matrices, fusion, decision)
     row = fuse(rows, scales, fusion.order_weights)
-    if not decision.rerank_k:
+    if not decision.rerank_k or n + 1 < 3:
         return row
     A = np.zeros((n + 1, n + 1))
     A[:n, :n] = fuse(mats, scales, fusion.order_weights)
     A[n, :n] = A[:n, n] = row
-    # the row of the query's node over the whole graph, the query's own node included in the maximum (as in
-    # manifold_ranking): the first match is 0 only when it scores like the query itself (the cosine of the
-    # diffusion states is 1 with the default normalisation), not whenever it is the best of the database
+    # the first match is 0 only when it scores like the query itself, not whenever it is the database's best
     out = manifold_ranking_row(A, n, decision.rerank_k, fusion.rerank_alpha, fusion.rerank_normalisation)[:n]
-    if not (out < 1.0).any():  # the query is cut off from the graph: rank by the fused dissimilarities
-        return row
-    # a database item identical to the query in every kept part comes first: on a small graph the
-    # diffusion can score a well-connected neighbour above it
+    with np.errstate(invalid="ignore"):
+        beyond = np.where(np.isfinite(row), 1.0 + row / (1.0 + row), np.inf)
+    out = np.where(out >= 1.0, beyond, out)
+    # an item at fused dissimilarity 0 comes first: on a small graph the diffusion can score a well-connected
+    # neighbour above it
     same = row == 0
     if same.any():
         out = np.where(same, 0.0, np.maximum(out, np.finfo(float).tiny))

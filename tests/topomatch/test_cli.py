@@ -149,3 +149,26 @@ def test_python_warnings_read_as_the_commands_own(capsys):
         _show_warning(message, UserWarning, "cache.py", 73)
         assert capsys.readouterr().err == expected
     common.reset(0)
+
+
+def test_the_command_reports_a_recomputed_cache_entry_as_its_own_warning(tmp_path):
+    # end to end: `topomatch query` meets cache entries it cannot read, recomputes them and says so in its own
+    # form (Python's display printed the file, the line and the source of the warnings.warn call)
+    from tests_paths import BUNDLED_MESHES
+
+    db, mesh = tmp_path / "i.db", BUNDLED_MESHES / "torus.off"
+    assert topomatch("index", mesh, "--db", db, "--method", "d2", "--no-progress").returncode == 0
+
+    def corrupt_cache():
+        entries = list((tmp_path / "i.db.cache").rglob("*.npz"))
+        assert entries
+        for entry in entries:
+            entry.write_bytes(b"not a cache entry")
+
+    corrupt_cache()
+    done = topomatch("query", mesh, "--db", db, "--method", "d2")
+    assert done.returncode == 0 and "topomatch: warning: cache entry" in done.stderr and "recomputing" in done.stderr
+    assert "warnings.warn" not in done.stderr and "CacheWarning" not in done.stderr
+    corrupt_cache()
+    done = topomatch("-q", "query", mesh, "--db", db, "--method", "d2")
+    assert done.returncode == 0 and done.stderr == "" and "torus.off" in done.stdout

@@ -273,13 +273,18 @@ def test_an_output_folder_that_cannot_be_written_is_refused_before_the_work(coll
     db = tmp_path / "d2.db"
     run(capsys, "index", collection, "--db", db, "--method", "d2", "--labels", collection / "labels.csv",
         "--no-progress")
+    # nothing is created before the work: a skeleton whose input fails leaves no output folder behind
+    code, _, err = run(capsys, "skeleton", tmp_path / "missing.off", "--out", tmp_path / "new" / "sk")
+    assert code == 1 and "missing.off: file not found" in err and not (tmp_path / "new").exists()
     blocker = tmp_path / "a_file"
     blocker.write_text("not a folder")
     monkeypatch.setattr(Collection, "part_matrices", lambda *a, **k: pytest.fail("computed before the check"))
     code, _, err = run(capsys, "evaluate", "--db", db, "--method", "d2", "--out", blocker / "D.npz")
     assert code == 1 and "a_file: not a folder to write into" in err
+    code, _, err = run(capsys, "evaluate", "--db", db, "--method", "d2", "--out", tmp_path / "nowhere" / "D.npz")
+    assert code == 1 and "nowhere: no such folder to write into" in err  # evaluate's folder must exist
     from topomatch import skeletons
 
     monkeypatch.setattr(skeletons, "skeleton_with", lambda *a, **k: pytest.fail("computed before the check"))
     code, _, err = run(capsys, "skeleton", collection / "torus.off", "--out", blocker / "sk")
-    assert code == 1 and "sk: cannot create this folder" in err
+    assert code == 1 and "sk: not a folder to write into (a file is in the way: " in err

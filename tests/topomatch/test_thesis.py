@@ -47,6 +47,9 @@ def test_thesis_runs_a_selection_and_writes_the_page(capsys, tmp_path, monkeypat
 def test_unknown_selection_is_an_error(capsys, tmp_path):
     assert main(["thesis", "--out", str(tmp_path), "--only", "9.9"]) == 2  # a usage error (README's exit codes)
     assert "no thesis figure or table matches 9.9" in capsys.readouterr().err
+    # beside an id that exists, too: nothing runs
+    assert main(["thesis", "--out", str(tmp_path), "--only", "3.2", "--only", "9.9"]) == 2
+    assert "no thesis figure or table matches 9.9;" in capsys.readouterr().err and not (tmp_path / "runs").exists()
 
 
 def test_items_asked_for_that_cannot_run_fail_the_command(capsys, tmp_path):
@@ -55,5 +58,5 @@ def test_items_asked_for_that_cannot_run_fail_the_command(capsys, tmp_path):
     code = main(["thesis", "--out", str(tmp_path), "--only", "figures/spectral_tooth", "--data-root",
                  str(tmp_path / "nowhere")])
     out, err = capsys.readouterr()
-    assert code == 1 and "not run" in out and "did not run (Fig. 4.3, Fig. 4.4)" in err
+    assert code == 1 and "not run" in out and "did not run or could not be measured (Fig. 4.3, Fig. 4.4)" in err
     assert (tmp_path / "thesis.html").is_file()

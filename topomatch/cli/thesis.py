@@ -42,8 +42,8 @@ def cmd_thesis(args: argparse.Namespace) -> int:
         for o in outcomes:
             print(f"{o.item.id:<{width}}  {o.verdict:<12}  {o.measured}")
         print(f"wrote {page}")
-    missed = [o.item.id for o in outcomes if o.verdict == "not run"]
-    if args.only and missed:  # asked for by name: not having run it is a failure, not a skip
-        raise RunError(f"{len(missed)} of the {len(outcomes)} items asked for did not run ({', '.join(missed)}): "
-                       "their reasons are listed above (the page was written)")
+    missed = [o.item.id for o in outcomes if o.verdict in ("not run", "not measured")]
+    if args.only and missed:  # asked for by name: not having run or measured it is a failure, not a skip
+        raise RunError(f"{len(missed)} of the {len(outcomes)} items asked for did not run or could not be measured "
+                       f"({', '.join(missed)}): their reasons are listed above (the page was written)")
     return 0
