@@ -55,9 +55,10 @@ def test_robustness_report_rotated_and_scaled_queries_find_their_original(labels
                  sweep_mode="one_at_a_time")
     outcome = run_experiment(build_experiment(cfg), out_root=tmp_path / "runs", progress=False)
     rows = tables(outcome, "r_metrics")
-    assert {r["perturbation"] for r in rows} == {"clean (leave-one-out)", "transform.angle_deg=75.0",
+    assert {r["perturbation"] for r in rows} == {"clean", "transform.angle_deg=75.0",
                                                  "transform.scale=3.0"}
     # D2 (normalised by its mean distance) and ShapeDNA (lambda A / i) are similarity invariants:
     # a rotated or scaled copy is nearest to its own original
     assert all(r["self@1"] == 1.0 and r["n"] == 6 for r in rows)
+    assert all(r["class_queries"] == 6 for r in rows)  # two classes of three: PSB evaluates every query
     assert (outcome.run_dir / "figures" / "r_metrics.png").is_file()
