@@ -9,6 +9,12 @@ Node ids are written as strings ("0", "1", ..., "root"); ``pos`` becomes ``x, y,
 (vertex ids) becomes a space-separated string in GraphML and a list in JSON. In the polylines the
 vertices are the graph's nodes in networkx order, so a node's row is its position in
 :func:`polyline`'s node list.
+
+The mixture skeleton's root node (id "root", band -1; thesis sec. 3.2) is joined to every node of the first
+band, which closes loops the surface does not have: the graph's own E - V + C counts them, the surface's
+cycle rank does not. So GraphML and JSON carry the graph attributes ``cycle_rank`` (without the root, as
+``topomatch skeleton`` prints it) and ``root`` (its id, or "" when there is none), and the PLY says both in
+comments (found by a hostile-user pass: an exported genus-2 skeleton read as 3 cycles).
 """
 
 from __future__ import annotations
@@ -26,7 +32,10 @@ SKELETON_FORMATS = ("ply", "obj", "graphml", "json")
 
 
 def _flat_graph(G: nx.MultiGraph, *, members_as_text: bool) -> nx.MultiGraph:
-    H = nx.MultiGraph()
+    from topomatch.stages.reeb.prune import cycle_rank
+    from topomatch.stages.reeb.reeb_graph import ROOT
+
+    H = nx.MultiGraph(cycle_rank=cycle_rank(G), root=ROOT if ROOT in G else "")
     for v, d in G.nodes(data=True):
         x, y, z = (float(c) for c in d["pos"])
         members = [int(i) for i in d.get("members", [])]
@@ -62,7 +71,13 @@ def skeleton_text(G: nx.MultiGraph, fmt: str) -> str:
         lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in P]
         lines += [f"l {a + 1} {b + 1}" for a, b in E]
     elif fmt == "ply":
+        from topomatch.stages.reeb.prune import cycle_rank
+        from topomatch.stages.reeb.reeb_graph import ROOT
+
+        root = (f"comment vertex {list(G.nodes).index(ROOT)} is the root node, joined to the first band's nodes"
+                if ROOT in G else "comment no root node")
         lines = ["ply", "format ascii 1.0", "comment topomatch skeleton: nodes and edges of a Reeb graph",
+                 f"comment cycle_rank {cycle_rank(G)} (without the root node)", root,
                  f"element vertex {len(P)}", "property double x", "property double y", "property double z",
                  f"element edge {len(E)}", "property int vertex1", "property int vertex2", "end_header"]
         lines += [f"{x:.17g} {y:.17g} {z:.17g}" for x, y, z in P]

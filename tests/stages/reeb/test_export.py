@@ -100,3 +100,18 @@ def test_mesh_text_reads_back_exactly(bundled_mesh, tmp_path, fmt):
     np.testing.assert_array_equal(F, m.F)
     o3 = o3d.io.read_triangle_mesh(str(path))
     assert len(o3.vertices) == m.n_vertices and len(o3.triangles) == m.n_faces
+
+
+def test_exported_graphs_carry_the_cycle_rank_of_the_surface(graph, tmp_path):
+    # the mixture skeleton's root joins the first band's nodes and closes loops the genus-2 surface does not have:
+    # the files say the surface's cycle rank (2) and which node is the root, so a reader can drop it
+    write_graphml(graph, tmp_path / "g.graphml")
+    write_json(graph, tmp_path / "g.json")
+    write_polyline(graph, tmp_path / "g.ply")
+    H = nx.read_graphml(tmp_path / "g.graphml", force_multigraph=True)
+    J = json.loads((tmp_path / "g.json").read_text())["graph"]
+    assert H.graph["cycle_rank"] == J["cycle_rank"] == 2 and H.graph["root"] == J["root"] == "root"
+    assert H.number_of_edges() - H.number_of_nodes() + 1 > 2  # with the root, the graph itself has more loops
+    H.remove_node(H.graph["root"])
+    assert H.number_of_edges() - H.number_of_nodes() + nx.number_connected_components(H) == 2
+    assert "comment cycle_rank 2 (without the root node)" in (tmp_path / "g.ply").read_text()
