@@ -304,6 +304,10 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
             continue
         if len(parts) < 2:
             raise ConfigError(f"--set {key}: expected a config key or stage.param")
+        swept = data.get("sweep") if isinstance(data.get("sweep"), dict) else {}
+        if key.strip() in swept:  # the sweep sets it at every point: a chain value would be silently ignored
+            raise ConfigError(f"--set {key}: the config sweeps {key.strip()} over {swept[key.strip()]!r}, which sets it "
+                              f"at every sweep point; set the sweep instead, e.g. --set 'sweep.{key.strip()}=[{text}]'")
         entries = _section(data, "stages", list, item)
         positions = [i for i, e in enumerate(entries) if _entry_name(e) == parts[0]]
         if len(positions) != 1:

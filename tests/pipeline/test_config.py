@@ -116,12 +116,21 @@ def test_data_root_required_when_used(small_config, write_config, monkeypatch):
 
 
 def test_overrides_set_stage_params_and_keys(small_config):
-    data = apply_overrides(small_config, ["noise.sigma=0.05", "executor.kind=dask", "name=other"])
+    data = apply_overrides(small_config, ["noise.seed=5", "executor.kind=dask", "name=other"])
     experiment = build_experiment(data)
-    assert experiment.calls[2].params.sigma == 0.05
+    assert experiment.calls[2].params.seed == 5
     assert experiment.raw.executor.kind == "dask"
     assert experiment.name == "other"
     assert small_config["name"] == "small", "overrides must not mutate the input"
+
+
+def test_override_of_a_swept_parameter_is_refused(small_config):
+    # the sweep sets noise.sigma at every point: a chain value would change the run's config and nothing else
+    swept = small_config  # it sweeps noise.sigma over [0.0, 0.01]
+    with pytest.raises(ConfigError, match=r"sweeps noise.sigma over \[0.0, 0.01\].*--set 'sweep.noise.sigma=\[0.02\]'"):
+        apply_overrides(swept, ["noise.sigma=0.02"])
+    data = apply_overrides(swept, ["sweep.noise.sigma=[0.02]"])
+    assert [p["noise.sigma"] for p in build_experiment(data).sweep_points()] == [0.02]
 
 
 def test_override_of_absent_stage(small_config):
