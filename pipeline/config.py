@@ -398,8 +398,12 @@ def resolve_inputs_config(inputs: InputsConfig, *, base_dir: Path, data_root: Pa
         return resolve_input(template, base_dir=base, root=data_root, where=where)
 
     for kind in ("meshes", "images"):
+        seen: set[Path] = set()
         for i, template in enumerate(getattr(inputs, kind)):
-            units += [InputUnit(display_path(p, data_root), {"path": p}) for p in one(template, f"inputs.{kind}[{i}]")]
+            for p in one(template, f"inputs.{kind}[{i}]"):
+                if p.resolve() not in seen:  # a file two entries (or overlapping globs) name is one input, not two
+                    seen.add(p.resolve())
+                    units.append(InputUnit(display_path(p, data_root), {"path": p}))
     for i, pair in enumerate(inputs.pairs):
         (fixed,) = one(pair.fixed, f"inputs.pairs[{i}].fixed")[:1]
         (moving,) = one(pair.moving, f"inputs.pairs[{i}].moving")[:1]

@@ -308,8 +308,10 @@ class ExportParams(Params):
 
 
 def item_file_stem(r) -> str:
-    """A file-name stem unique to an item: the input's stem and its sweep values."""
-    stem = Path(r.input_path).name.split(".")[0]
+    """A file-name stem unique to an item: the input's stem and its sweep values (the input's whole label when two
+    inputs share a file name: the item id names them by their paths then)."""
+    base = r.item_id.split("[", 1)[0]
+    stem = Path(r.input_path).name.split(".")[0] if base == Path(r.input_path).name else base.strip("{}/.")
     sweep = "_".join(f"{k.split('.')[-1]}-{v}" for k, v in r.sweep.items())
     return "".join(c if c.isalnum() or c in "._-" else "-" for c in (f"{stem}_{sweep}" if sweep else stem))
 

@@ -54,6 +54,24 @@ def test_export_writes_meshes_and_skeletons_that_read_back(skeleton_run):
         assert sum(1 for v in G if v != "root" and G.degree(v) == 1) == len(skel.endpoints)
 
 
+def test_inputs_that_share_a_file_name_export_apart_and_a_repeated_input_counts_once(tmp_path):
+    import igl
+    import open3d as o3d
+
+    V, F = igl.read_triangle_mesh(str(BUNDLED_MESHES / "torus.off"))
+    (tmp_path / "alt").mkdir()
+    igl.write_triangle_mesh(str(tmp_path / "alt" / "torus.off"), 2.0 * V, F)  # another torus.off, twice as large
+    config = {"name": "same-names", "inputs": {"meshes": [str(BUNDLED_MESHES / "torus.off"), str(tmp_path / "alt" / "*.off"),
+                                                          str(BUNDLED_MESHES / "torus.off")]},
+              "stages": ["load"], "reports": [{"export": {"meshes": ["load"]}}]}
+    outcome = run_experiment(build_experiment(config), out_root=tmp_path / "runs", progress=False)
+    rows = json.loads((outcome.run_dir / "tables" / "exports.json").read_text())
+    assert len(outcome.items) == 2 and len({r["file"] for r in rows}) == 2  # two inputs, two folders
+    sizes = sorted(np.ptp(np.asarray(o3d.io.read_triangle_mesh(str(outcome.run_dir / r["file"])).vertices), axis=0).max()
+                   for r in rows)
+    assert sizes[1] == pytest.approx(2 * sizes[0])  # neither overwrote the other
+
+
 def test_export_refuses_a_stage_that_makes_no_mesh(tmp_path):
     config = {"name": "bad-export", "inputs": {"meshes": [str(BUNDLED_MESHES / "torus.off")]},
               "stages": ["load", {"morse": {"function": "mixture"}}],
