@@ -79,6 +79,9 @@ def test_export_refuses_a_stage_that_makes_no_mesh(tmp_path):
     outcome = run_experiment(build_experiment(config), out_root=tmp_path, progress=False)
     assert outcome.manifest["outputs"]["export"] == [
         "ERROR: report export failed: ConfigError: export: stage 'morse' produces no mesh; choose among ['load']"]
+    # the page's status says so next to the items' (it said "all 1 items ok" in green and nothing else)
+    page = (outcome.run_dir / "index.html").read_text()
+    assert "all 1 items ok" in page and "1 of 1 reports failed</span> (export: the error is in their section)" in page
 
 
 def test_gallery_has_keys_and_every_format(skeleton_run):
