@@ -13,7 +13,7 @@ from typing import Any
 
 from pydantic import Field
 
-from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, axis_label, report
+from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, axis_label, report, series_style, sweep_ticks
 
 class TableParams(Params):
     name: str = Field("summary", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the table")
@@ -71,18 +71,22 @@ def line_plot_report(experiment, results, params: LinePlotParams) -> ReportOutpu
     names = []
     for i, (ax, y) in enumerate(zip(axes[0], params.y)):
         groups: dict[str, list[tuple[float, float]]] = {}
+        others = [k for k in experiment.raw.sweep if k != params.x]  # one line per value of every other sweep key
         for row in rows:
             if params.x in row and y in row:
-                group = Path(str(row.get(params.group_by, ""))).name
+                group = " ".join([Path(str(row.get(params.group_by, ""))).name]
+                                 + [f"{k.split('.')[-1]}={row[k]}" for k in others if k in row])
                 groups.setdefault(group, []).append((float(row[params.x]), float(row[y])))
         if not groups:
             raise ConfigError(f"line_plot: no rows have both {params.x!r} and {y!r}")
-        for group, pts in groups.items():
+        for j, (group, pts) in enumerate(groups.items()):
             pts.sort()
             if params.normalize and pts[0][1] == 0:
                 raise ConfigError(f"line_plot {params.name}: cannot normalise {y!r} by its value 0 at {params.x}={pts[0][0]}")
             scale = pts[0][1] if params.normalize else 1.0
-            ax.plot([p[0] for p in pts], [p[1] / scale for p in pts], marker="o", label=group)
+            ax.plot([p[0] for p in pts], [p[1] / scale for p in pts], label=group, **series_style(j))
+        if not params.logx:
+            sweep_ticks(ax, [p[0] for pts in groups.values() for p in pts])
         name = params.ylabels[i] if params.ylabels else axis_label(experiment, results, y)
         names.append(name.split(" (")[0])
         if params.normalize and not params.ylabels:

@@ -126,6 +126,24 @@ def gallery_layout(results, columns: int) -> tuple[int, int, list[int]]:
     return len(inputs), len(points), cells
 
 
+def sweep_ticks(ax, values) -> None:
+    """x ticks at the swept values themselves when there are few (2-8; ``%g``), so that a sweep such as
+    0, 0.001, 0.002, 0.004 is read at its points and its labels never run together; else at most 6 ticks."""
+    from matplotlib.ticker import MaxNLocator
+
+    xs = sorted({float(v) for v in values})
+    if 1 < len(xs) <= 8:
+        ax.set_xticks(xs, [f"{v:g}" for v in xs])
+    else:
+        ax.xaxis.set_major_locator(MaxNLocator(6))
+
+
+def series_style(i: int) -> dict:
+    """Plot keywords of the ``i``-th line of a figure: the 10 default colours, then the same colours dashed,
+    then dotted (with another marker), so that no two of up to 30 lines look alike."""
+    return {"color": f"C{i % 10}", "linestyle": ("-", "--", ":")[i // 10 % 3], "marker": "osD"[i // 10 % 3]}
+
+
 def axis_label(experiment, results, key: str) -> str:
     """How a figure names a sweep key or results column, with its unit.
 

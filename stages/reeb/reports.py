@@ -3,13 +3,14 @@ skeleton on top, endpoints in red and the root as a gold star."""
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.contract import Params, ReportOutput, axis_label, gallery_layout, report
+from topomatch.pipeline.contract import Params, ReportOutput, axis_label, gallery_layout, report, series_style, sweep_ticks
 
 
 class SkeletonGalleryParams(Params):
@@ -109,7 +110,10 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
         function = r.final("function")
         kind = function.kind if function is not None else ""
         functions.add(kind)
-        ax.set_title(f"{label} ({FUNCTION_NAMES.get(kind, kind)}) {sweep}\n{caption}", fontsize=7)
+        # wrapped to the panel's width (about 14 characters of 7 pt text per inch): long names and several sweep
+        # values would run into the next panel's title
+        head = textwrap.fill(f"{label} ({FUNCTION_NAMES.get(kind, kind)}) {sweep}", width=int(params.panel_size * 14))
+        ax.set_title(f"{head}\n{caption}", fontsize=7)
     bottom = keys_height / (params.panel_size * rows + keys_height)
     top_inches = 0.3 + 0.35 * bool(params.title)
     fig.subplots_adjust(left=0, right=1, bottom=bottom, top=1 - top_inches / (params.panel_size * rows + keys_height),
@@ -266,12 +270,14 @@ def skeleton_stability_report(experiment, results, params: StabilityParams) -> R
         extra = [f"{k.split('.')[-1]}={row[k]}" for k in experiment.raw.sweep if k != params.x and k in row]
         return " ".join([row["input"].split(".")[0]] + extra)
 
-    for name in dict.fromkeys(line(row) for row in rows):
+    numeric_x = True
+    for i, name in enumerate(dict.fromkeys(line(row) for row in rows)):
         pts = sorted((row[params.x], row["distance_mean_rel"], row["endpoints"]) for row in rows
                      if line(row) == name and params.x in row)
-        xs = list(range(len(pts))) if pts and isinstance(pts[0][0], str) else [p[0] for p in pts]
-        axes[0].plot(xs, [p[1] for p in pts], marker="o", label=name)
-        axes[1].plot(xs, [p[2] for p in pts], marker="o", label=name)
+        numeric_x = numeric_x and not (pts and isinstance(pts[0][0], str))
+        xs = [p[0] for p in pts] if numeric_x else list(range(len(pts)))
+        axes[0].plot(xs, [p[1] for p in pts], label=name, **series_style(i))
+        axes[1].plot(xs, [p[2] for p in pts], label=name, **series_style(i))
     reference = ", ".join(f"{axis_label(experiment, results, k).split(' (')[0]} = {v}" for k, v in params.reference.items())
     xlabel = axis_label(experiment, results, params.x)
     axes[0].set_ylabel("mean distance to the reference skeleton\n(× bounding-box diagonal)")
@@ -282,6 +288,8 @@ def skeleton_stability_report(experiment, results, params: StabilityParams) -> R
     for ax in axes:
         ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3)
+        if numeric_x and rows:
+            sweep_ticks(ax, [row[params.x] for row in rows if params.x in row])
     fig.suptitle(params.title or f"Skeleton stability against {xlabel.split(' (')[0]} (reference: {reference})",
                  fontsize=11)
     fig.tight_layout()

@@ -65,3 +65,23 @@ def test_run_page_summary_headings_figure_formats_and_labels(small_config, tmp_p
     assert "<figcaption>Figure 1: Area vs noise." in page and "figures/area_vs_noise.pdf" in page
     assert "broken.off" in page[page.index("Failed items"):]
     assert not re.search(r"\d\.\d{4,}e-\d\d", page)  # no unformatted floats such as 1.8083e-16
+
+
+def test_line_plot_draws_one_line_per_value_of_the_other_sweep_keys(small_config, tmp_path):
+    # a grid over noise.sigma x noise.seed: a line per input and seed, each told apart (they were merged into one
+    # line per input, jumping between the seeds), with ticks at the swept values
+    from topomatch.pipeline.builtin_reports import line_plot_report
+    from topomatch.pipeline.registry import get_report
+
+    small_config["sweep"] = {"noise.sigma": [0.0, 0.001, 0.002, 0.004], "noise.seed": [1, 2]}
+    small_config["sweep_mode"] = "grid"
+    experiment = build_experiment(small_config)
+    outcome = run_experiment(experiment, out_root=tmp_path / "runs", progress=False)
+    params = get_report("line_plot").params.model_validate({"name": "a", "x": "noise.sigma", "y": ["measures.area"]})
+    fig = line_plot_report(experiment, outcome.items, params).figures["a"]
+    ax = fig.axes[0]
+    labels = [line.get_label() for line in ax.get_lines()]
+    assert len(labels) == 2 * len(experiment.inputs) and len(set(labels)) == len(labels)
+    assert all(len(line.get_xdata()) == 4 for line in ax.get_lines())
+    assert len({(line.get_color(), line.get_linestyle()) for line in ax.get_lines()}) == len(labels)
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["0", "0.001", "0.002", "0.004"]
