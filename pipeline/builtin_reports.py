@@ -39,6 +39,8 @@ def select_columns(rows: list[dict[str, Any]], patterns: list[str]) -> list[dict
 def table_report(experiment, results, params: TableParams) -> ReportOutput:
     """Selected columns of the results table."""
     rows = select_columns([r.row() for r in results if r.ok or not params.only_ok], params.columns)
+    if rows and not any(rows):  # every row empty: no column matched (a table of blank lines said nothing)
+        raise ConfigError(f"table {params.name}: the columns {params.columns} match no results column")
     if params.unique:
         seen: set[str] = set()
         rows = [r for r in rows if not (json.dumps(r, sort_keys=True, default=str) in seen

@@ -10,7 +10,8 @@ from typing import Literal
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.contract import Params, ReportOutput, axis_label, gallery_layout, report, series_style, sweep_ticks
+from topomatch.pipeline.contract import (ConfigError, Params, ReportOutput, axis_label, gallery_layout, report,
+                                        series_style, sweep_ticks)
 
 
 class SkeletonGalleryParams(Params):
@@ -92,7 +93,11 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
     (red) and root (gold star), drawn depth-sorted."""
     import matplotlib.pyplot as plt
 
-    results = [r for r in results if all(r.sweep.get(k) == v for k, v in params.where.items())]
+    chosen = [r for r in results if all(r.sweep.get(k) == v for k, v in params.where.items())]
+    if not chosen:
+        raise ConfigError(f"skeleton_gallery {params.name}: where {params.where} matches none of the "
+                          f"{len(results)} items")
+    results = chosen
     rows, cols, cells = gallery_layout(results, params.columns)
     keys_height = 0.9  # inches for the colour bar and legend
     fig = plt.figure(figsize=(params.panel_size * cols, params.panel_size * rows + keys_height))
@@ -239,6 +244,11 @@ def skeleton_stability_report(experiment, results, params: StabilityParams) -> R
     item's skeleton (same input), relative to the reference mesh's bounding-box diagonal."""
     import matplotlib.pyplot as plt
 
+    unknown = [k for k in (*params.reference, params.x) if k not in experiment.raw.sweep]
+    if unknown:  # a misspelt key drew an empty figure and said nothing
+        raise ConfigError(f"skeleton_stability {params.name}: {', '.join(unknown)} is not a sweep key of the config "
+                          f"(sweep keys: {', '.join(experiment.raw.sweep) or 'none'})")
+
     def matrix(r):
         t = r.results.get("transform")
         return t.matrix if (params.undo_transform and t is not None) else None
@@ -328,7 +338,6 @@ def item_file_stem(r) -> str:
 def export_report(experiment, results, params: ExportParams) -> ReportOutput:
     """Write each item's meshes (final, cleaned, decimated, ...) and skeletons as files other tools open
     (PLY / OBJ / OFF meshes; PLY or OBJ polylines, GraphML, JSON graphs) into ``exports/``."""
-    from topomatch.pipeline.contract import ConfigError
     from topomatch.stages.mesh.export import mesh_text
     from topomatch.stages.reeb.export import skeleton_text
 

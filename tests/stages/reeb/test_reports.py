@@ -136,3 +136,20 @@ def test_run_page_loads_in_chromium_with_its_3d_view(skeleton_run, tmp_path):
     assert "view-view" in dom and "torus" in dom
     shot = screenshot(d / "views" / "view.html", "run_page_3d.png", tmp_path)
     assert shot.stat().st_size > 20_000
+
+
+def test_reports_that_would_draw_nothing_fail_with_what_is_wrong(tmp_path):
+    # a misspelt sweep key drew an empty stability figure with exit 0; a gallery whose `where` matched nothing
+    # failed inside matplotlib; a table whose columns matched nothing wrote blank lines
+    config = {"name": "empty-reports", "inputs": {"meshes": [str(BUNDLED_MESHES / "torus.off")]},
+              "sweep": {"level_sets.levels": [10, 12]},
+              "stages": ["load", {"morse": {"function": "mixture"}}, "level_sets", "reeb_graph", "prune"],
+              "reports": [{"skeleton_stability": {"name": "s", "reference": {"level_sets.levls": 10},
+                                                  "x": "level_sets.levels"}},
+                          {"skeleton_gallery": {"name": "g", "where": {"level_sets.levels": 99}}},
+                          {"table": {"name": "t", "columns": ["nothing.*"]}}]}
+    outcome = run_experiment(build_experiment(config), out_root=tmp_path, progress=False)
+    errors = {k: v[0] for k, v in outcome.manifest["outputs"].items()}
+    assert "level_sets.levls is not a sweep key of the config (sweep keys: level_sets.levels)" in errors["skeleton_stability"]
+    assert "where {'level_sets.levels': 99} matches none of the 2 items" in errors["skeleton_gallery"]
+    assert "the columns ['nothing.*'] match no results column" in errors["table"]
