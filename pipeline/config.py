@@ -373,7 +373,11 @@ def build_experiment(
     try:
         raw = validate_json_strict(RawConfig, data, "")
         calls = resolve_chain(raw.stages)
-        check_chain(calls, {key for kind, keys in INPUT_STATE.items() if getattr(raw.inputs, kind) for key in keys})
+        given = {key for kind, keys in INPUT_STATE.items() if getattr(raw.inputs, kind) for key in keys}
+        if not given and any(k in call.spec.consumes for call in calls for keys in INPUT_STATE.values() for k in keys):
+            raise ConfigError("inputs: the chain reads input files, and the config lists none; give e.g. "
+                              "inputs: {meshes: [\"{bundled}/meshes/*.off\"]}")
+        check_chain(calls, given)
         _check_sweeps(raw, calls)
         reports = _resolve_reports(raw)
     except ConfigError as exc:

@@ -144,3 +144,11 @@ def test_content_hash_tracks_params_not_executor(small_config):
     c = build_experiment(apply_overrides(small_config, ["noise.seed=4"]))
     assert a.content_hash() == b.content_hash()
     assert a.content_hash() != c.content_hash()
+
+
+def test_a_chain_that_reads_files_needs_inputs(small_config):
+    # an empty input list was reported as the first stage needing 'path' "which neither the inputs nor an earlier
+    # stage provide"; it is the inputs that are missing
+    small_config["inputs"] = {"meshes": []}
+    with pytest.raises(ConfigError, match=r"inputs: the chain reads input files, and the config lists none"):
+        build_experiment(small_config)
