@@ -426,7 +426,10 @@ class RegistrationTableParams(Params):
 
 @report("registration_table", params=RegistrationTableParams)
 def registration_table_report(experiment, results, params: RegistrationTableParams) -> ReportOutput:
-    """One row per item and registration method: estimate, truth, errors, TRE, self-check, time."""
+    """One row per item and method: estimate, truth, errors, TRE, self-check, time (in image units, degrees, s).
+
+    Translations, their errors and the TRE are in the images' physical units (pixels for PNG, mm for volumes),
+    angles in degrees, the time in seconds."""
     rows = []
     for r in results:
         evals = [res for _, res in _of_type(r, "EvaluateResult")]
