@@ -35,6 +35,7 @@ from retrieval_selection import ORDER_WEIGHTS, grid_settings, load, nn_map
 
 from topomatch.meshes import read_mesh
 from topomatch.retrieval import open_index
+from topomatch.stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, triangle_areas
 from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, get_method
 from topomatch.stages.retrieval.fusion import agreement, decide, fused_matrix
 
@@ -46,10 +47,9 @@ DEPTH_FREQUENCIES = 8
 def principal_frame(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     """(n, 3) vertices in the surface's area-weighted principal frame (exact triangle second moments; axes by
     decreasing variance, each flipped so that the area-weighted third moment of the face centroids is >= 0)."""
-    T = V[F]
-    area = 0.5 * np.linalg.norm(np.cross(T[:, 1] - T[:, 0], T[:, 2] - T[:, 0]), axis=1)
-    centroid = (area[:, None] * T.mean(axis=1)).sum(axis=0) / area.sum()
-    T = T - centroid
+    area = triangle_areas(V, F)
+    centroid = area_centroid_and_rms_radius(V, F, area)[0]
+    T = V[F] - centroid
     s = T.sum(axis=1)
     C = (np.einsum("f,fi,fj->ij", area, s, s) + np.einsum("f,fki,fkj->ij", area, T, T)) / (12.0 * area.sum())
     axes = np.linalg.eigh(C)[1][:, ::-1]

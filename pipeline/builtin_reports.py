@@ -13,7 +13,8 @@ from typing import Any
 
 from pydantic import Field
 
-from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, axis_label, report, series_style, sweep_ticks
+from topomatch.pipeline.contract import (ConfigError, Params, ReportOutput, axis_label, report, series_style,
+                                        sweep_ticks, sweep_value_labels)
 
 class TableParams(Params):
     name: str = Field("summary", pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the table")
@@ -73,11 +74,10 @@ def line_plot_report(experiment, results, params: LinePlotParams) -> ReportOutpu
     names = []
     for i, (ax, y) in enumerate(zip(axes[0], params.y)):
         groups: dict[str, list[tuple[float, float]]] = {}
-        others = [k for k in experiment.raw.sweep if k != params.x]  # one line per value of every other sweep key
         for row in rows:
-            if params.x in row and y in row:
+            if params.x in row and y in row:  # one line per input and value of every other sweep key
                 group = " ".join([Path(str(row.get(params.group_by, ""))).name]
-                                 + [f"{k.split('.')[-1]}={row[k]}" for k in others if k in row])
+                                 + sweep_value_labels(experiment, row, skip=(params.x,)))
                 groups.setdefault(group, []).append((float(row[params.x]), float(row[y])))
         if not groups:
             raise ConfigError(f"line_plot: no rows have both {params.x!r} and {y!r}")

@@ -138,6 +138,12 @@ def sweep_ticks(ax, values) -> None:
         ax.xaxis.set_major_locator(MaxNLocator(6))
 
 
+def sweep_value_labels(experiment, values: dict, skip=()) -> list[str]:
+    """``param=value`` for each sweep key of the experiment that ``values`` holds (a results row or an item's
+    sweep point) and ``skip`` does not: how a legend or a panel title tells apart items of one input."""
+    return [f"{k.split('.')[-1]}={values[k]}" for k in experiment.raw.sweep if k not in skip and k in values]
+
+
 def series_style(i: int) -> dict:
     """Plot keywords of the ``i``-th line of a figure: the 10 default colours, then the same colours dashed,
     then dotted (with another marker), so that no two of up to 30 lines look alike."""

@@ -221,8 +221,7 @@ def _summary(experiment, results, manifest: dict) -> str:
     status = (f"<span class='err'>{n_failed} of {manifest['n_items']} items failed</span> (listed below)"
               if n_failed else f"<span class='ok'>all {manifest['n_items']} items ok</span>")
     outputs = manifest.get("outputs", {})
-    failed_reports = [label for label, files in outputs.items()
-                      if any(str(f).startswith("ERROR:") for f in (files if isinstance(files, list) else [files]))]
+    failed_reports = [label for label, files in outputs.items() if any(f.startswith("ERROR: ") for f in files)]
     if failed_reports:  # the items can all be fine while a report of them is not
         status += (f"; <span class='err'>{len(failed_reports)} of {len(outputs)} reports failed</span> "
                    f"({esc(', '.join(failed_reports))}: the error is in their section)")

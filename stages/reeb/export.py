@@ -26,15 +26,14 @@ import networkx as nx
 import numpy as np
 
 from topomatch.pipeline.contract import atomic_write_text
+from topomatch.stages.reeb.prune import cycle_rank
+from topomatch.stages.reeb.reeb_graph import ROOT
 
 #: The skeleton file formats, by file suffix (the default, PLY, first).
 SKELETON_FORMATS = ("ply", "obj", "graphml", "json")
 
 
 def _flat_graph(G: nx.MultiGraph, *, members_as_text: bool) -> nx.MultiGraph:
-    from topomatch.stages.reeb.prune import cycle_rank
-    from topomatch.stages.reeb.reeb_graph import ROOT
-
     H = nx.MultiGraph(cycle_rank=cycle_rank(G), root=ROOT if ROOT in G else "")
     for v, d in G.nodes(data=True):
         x, y, z = (float(c) for c in d["pos"])
@@ -71,9 +70,6 @@ def skeleton_text(G: nx.MultiGraph, fmt: str) -> str:
         lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in P]
         lines += [f"l {a + 1} {b + 1}" for a, b in E]
     elif fmt == "ply":
-        from topomatch.stages.reeb.prune import cycle_rank
-        from topomatch.stages.reeb.reeb_graph import ROOT
-
         root = (f"comment vertex {list(G.nodes).index(ROOT)} is the root node, joined to the first band's nodes"
                 if ROOT in G else "comment no root node")
         lines = ["ply", "format ascii 1.0", "comment topomatch skeleton: nodes and edges of a Reeb graph",

@@ -11,7 +11,7 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import (ConfigError, Params, ReportOutput, axis_label, gallery_layout, report,
-                                        series_style, sweep_ticks)
+                                        series_style, sweep_ticks, sweep_value_labels)
 
 
 class SkeletonGalleryParams(Params):
@@ -105,8 +105,7 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
     for r, cell in zip(results, cells):
         ax = fig.add_subplot(rows, cols, cell + 1)
         label = Path(r.input_path).name.split(".")[0]
-        sweep = ", ".join(f"{k.split('.')[-1]}={v}" for k, v in r.sweep.items()
-                          if k not in params.where and k != "morse.function")
+        sweep = ", ".join(sweep_value_labels(experiment, r.sweep, skip=(*params.where, "morse.function")))
         if r.final("mesh") is None:
             ax.set_axis_off()
             ax.set_title(f"{label}\nfailed", fontsize=7, color="#b00")
@@ -277,8 +276,7 @@ def skeleton_stability_report(experiment, results, params: StabilityParams) -> R
         })
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     def line(row):
-        extra = [f"{k.split('.')[-1]}={row[k]}" for k in experiment.raw.sweep if k != params.x and k in row]
-        return " ".join([row["input"].split(".")[0]] + extra)
+        return " ".join([row["input"].split(".")[0]] + sweep_value_labels(experiment, row, skip=(params.x,)))
 
     numeric_x = True
     for i, name in enumerate(dict.fromkeys(line(row) for row in rows)):

@@ -216,13 +216,14 @@ def _open_meshes_note(method: str) -> str:
     """What ``method``'s parts do with a mesh's boundaries."""
     from topomatch.stages.retrieval.catalogue import get_method
 
-    parts = [get_method(p) for p in get_method(method).parts]
-    if any("fill_holes" in m.chain for m in parts):
+    chains = [get_method(p).chain for p in get_method(method).parts]
+    if any("fill_holes" in chain for chain in chains):
         return ("their holes were capped (a fan to each boundary loop's centroid) for the spectrum, heat kernel and "
                 "skeleton; D2 and spherical harmonics see them as they are")
-    if all(m.name in ("d2", "sh") for m in parts):
-        return "their surface is sampled as it is"
-    return "the Laplacian and the skeleton use natural (Neumann) boundary conditions"
+    stages = {step if isinstance(step, str) else next(iter(step)) for chain in chains for step in chain}
+    if stages & {"spectrum", "shapedna", "morse"}:  # a Laplacian on the mesh
+        return "the Laplacian and the skeleton use natural (Neumann) boundary conditions"
+    return "their surface is sampled as it is"
 
 
 def cmd_query(args: argparse.Namespace) -> int:
