@@ -1,0 +1,99 @@
+/* One pass of the registration's joint histogram: rigid map, N-linear interpolation and binning per sample.
+ *
+ * The compiled path of topomatch.stages.registration.histogram.JointHistogram (its numpy method is the
+ * reference and the fallback without this extension; a test checks they agree). Written by hand because no
+ * library computes a binned joint histogram of a rigidly resampled image at sample points (ITK's Mattes metric
+ * does, inside ITK's optimiser loop only); compiled ahead of time (not by numba at run time) so that a
+ * registration pays no compiler start-up. 2D images arrive as 3D images of one slice (size[2] == 1, the third
+ * row of A and b zero), so one kernel serves both dimensions.
+ *
+ * joint_histogram(A, b, P, mflat, mbins, (mi, mj, mk), fbk, bmax, mode, h0, h1) -> n_inside
+ *   A (3 x 3 float64, row-major), b (3 float64): moving continuous index u = A p + b of a sample at p;
+ *   P (3 x n float64, row-major): the samples' physical positions about the rotation centre;
+ *   mflat (mk*mj*mi float64): moving intensities in bin units, bin centres at integers (modes 0, 1);
+ *   mbins (mk*mj*mi int64): moving bins (mode 2);
+ *   fbk (n int64): each sample's fixed bin times the number of moving bins;
+ *   mode 0: interpolated value, nearest bin; 1: split linearly between the two nearest bins (first-order
+ *   B-spline Parzen window); 2: partial volume (each corner's weight to its own bin);
+ *   h0, h1 (n_cells + 1 float64, zeroed by the caller): accumulators; the histogram is h0 + h1.
+ * Samples outside the moving grid (0 <= u <= size - 1 on every axis) are skipped; n_inside counts the others.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <stdint.h>
+
+static PyObject *joint_histogram(PyObject *self, PyObject *args) {
+    Py_buffer A, b, P, mflat, mbins, fbk, h0, h1;
+    Py_ssize_t mi, mj, mk;
+    long bmax;
+    int mode;
+    if (!PyArg_ParseTuple(args, "y*y*y*y*y*(nnn)y*liw*w*", &A, &b, &P, &mflat, &mbins, &mi, &mj, &mk, &fbk, &bmax,
+                          &mode, &h0, &h1))
+        return NULL;
+    const double *a = (const double *)A.buf, *o = (const double *)b.buf, *p = (const double *)P.buf;
+    const double *m = (const double *)mflat.buf;
+    const int64_t *mb = (const int64_t *)mbins.buf, *fb = (const int64_t *)fbk.buf;
+    double *g0 = (double *)h0.buf, *g1 = (double *)h1.buf;
+    Py_ssize_t n = fbk.len / (Py_ssize_t)sizeof(int64_t), inside = 0;
+    const double hi_i = (double)(mi - 1), hi_j = (double)(mj - 1), hi_k = (double)(mk - 1);
+    const Py_ssize_t i0max = mi > 1 ? mi - 2 : 0, j0max = mj > 1 ? mj - 2 : 0, k0max = mk > 1 ? mk - 2 : 0;
+    const Py_ssize_t di = mi > 1 ? 1 : 0, dj = mj > 1 ? mi : 0, dk = mk > 1 ? mi * mj : 0;
+    const long bmax0 = bmax > 0 ? bmax - 1 : 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (Py_ssize_t s = 0; s < n; s++) {
+        const double x = p[s], y = p[n + s], z = p[2 * n + s];
+        const double u = a[0] * x + a[1] * y + a[2] * z + o[0];
+        const double v = a[3] * x + a[4] * y + a[5] * z + o[1];
+        const double w = a[6] * x + a[7] * y + a[8] * z + o[2];
+        if (!(u >= 0.0 && u <= hi_i && v >= 0.0 && v <= hi_j && w >= 0.0 && w <= hi_k))
+            continue;
+        inside++;
+        Py_ssize_t ii = (Py_ssize_t)u, jj = (Py_ssize_t)v, kk = (Py_ssize_t)w;
+        if (ii > i0max) ii = i0max;
+        if (jj > j0max) jj = j0max;
+        if (kk > k0max) kk = k0max;
+        const double fx = u - ii, fy = v - jj, fz = w - kk;
+        const Py_ssize_t base = kk * mi * mj + jj * mi + ii;
+        const Py_ssize_t c[8] = {base, base + di, base + dj, base + dj + di,
+                                 base + dk, base + dk + di, base + dk + dj, base + dk + dj + di};
+        const int64_t cell0 = fb[s];
+        if (mode == 2) {
+            const double wx[2] = {1.0 - fx, fx}, wy[2] = {1.0 - fy, fy}, wz[2] = {1.0 - fz, fz};
+            for (int q = 0; q < 8; q++) {
+                const double wt = wx[q & 1] * wy[(q >> 1) & 1] * wz[q >> 2];
+                if (wt > 0.0) g0[cell0 + mb[c[q]]] += wt;
+            }
+            continue;
+        }
+        double a0 = m[c[0]] + fx * (m[c[1]] - m[c[0]]);
+        const double a1 = m[c[2]] + fx * (m[c[3]] - m[c[2]]);
+        double a2 = m[c[4]] + fx * (m[c[5]] - m[c[4]]);
+        const double a3 = m[c[6]] + fx * (m[c[7]] - m[c[6]]);
+        a0 += fy * (a1 - a0);
+        a2 += fy * (a3 - a2);
+        a0 += fz * (a2 - a0);
+        double val = a0 < 0.0 ? 0.0 : (a0 > (double)bmax ? (double)bmax : a0);
+        if (mode == 0) {
+            long bin = (long)(a0 + 0.5);
+            g0[cell0 + (bin < 0 ? 0 : (bin > bmax ? bmax : bin))] += 1.0;
+        } else {
+            long m0 = (long)val;
+            if (m0 > bmax0) m0 = bmax0;
+            const double wt = val - (double)m0;
+            g0[cell0 + m0] += 1.0 - wt;
+            g1[cell0 + m0 + 1] += wt;
+        }
+    }
+    Py_END_ALLOW_THREADS
+    PyBuffer_Release(&A); PyBuffer_Release(&b); PyBuffer_Release(&P); PyBuffer_Release(&mflat);
+    PyBuffer_Release(&mbins); PyBuffer_Release(&fbk); PyBuffer_Release(&h0); PyBuffer_Release(&h1);
+    return PyLong_FromSsize_t(inside);
+}
+
+static PyMethodDef methods[] = {
+    {"joint_histogram", joint_histogram, METH_VARARGS, "Accumulate the joint histogram of rigidly mapped samples."},
+    {NULL, NULL, 0, NULL}};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_histogram", NULL, -1, methods};
+
+PyMODINIT_FUNC PyInit__histogram(void) { return PyModule_Create(&module); }
