@@ -181,23 +181,57 @@ def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...], tuple[f
         except InputError:
             if fmt not in (".tif", ".tiff"):
                 raise  # TIFF variants Pillow cannot decode go to SimpleITK
-    import SimpleITK as sitk
-
-    image = read_sitk(path)
-    if image.GetNumberOfComponentsPerPixel() > 1:
-        if image.GetDimension() == 2 and image.GetNumberOfComponentsPerPixel() in (3, 4):
-            arr = sitk.GetArrayFromImage(image)[..., :3].astype(np.float64) @ np.array([0.299, 0.587, 0.114])
-            return arr, image.GetSpacing(), image.GetOrigin(), np.array(image.GetDirection()).reshape(2, 2)
-        raise InputError(path, f"has {image.GetNumberOfComponentsPerPixel()} components per pixel (colour or vector "
-                               f"data); registration needs one intensity per pixel")
-    arr = sitk.GetArrayFromImage(image)
-    d = image.GetDimension()
-    keep = [a for a in range(d) if image.GetSize()[a] > 1]  # ITK axes of more than one pixel
-    direction = np.array(image.GetDirection()).reshape(d, d)[np.ix_(keep, keep)]
+    arr, spacing, origin, direction = _read_nifti(path) if fmt in (".nii", ".nii.gz") else _read_with_sitk(path)
+    d = arr.ndim
+    keep = [a for a in range(d) if arr.shape[d - 1 - a] > 1]  # ITK axes of more than one pixel
+    direction = np.asarray(direction).reshape(d, d)[np.ix_(keep, keep)]
     if len(keep) < d and not abs(np.linalg.det(direction)) > 1e-6:
         direction = np.eye(len(keep))
     arr = arr.reshape([arr.shape[d - 1 - a] for a in reversed(keep)])
-    return (arr, tuple(image.GetSpacing()[a] for a in keep), tuple(image.GetOrigin()[a] for a in keep), direction)
+    return arr, tuple(spacing[a] for a in keep), tuple(origin[a] for a in keep), direction
+
+
+def _read_with_sitk(path: Path):
+    """Pixels (SimpleITK's array order; colour as luminance), spacing, origin, direction of a file SimpleITK reads."""
+    import SimpleITK as sitk
+
+    image = read_sitk(path)
+    arr = sitk.GetArrayFromImage(image)
+    components = image.GetNumberOfComponentsPerPixel()
+    if components > 1:
+        if image.GetDimension() != 2 or components not in (3, 4):
+            raise InputError(path, f"has {components} components per pixel (colour or vector data); registration "
+                                   f"needs one intensity per pixel")
+        arr = arr[..., :3].astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+    return arr, image.GetSpacing(), image.GetOrigin(), image.GetDirection()
+
+
+def _read_nifti(path: Path):
+    """A NIfTI file's voxels read by nibabel (SimpleITK's reader turns NaN into 0 and zero-fills a truncated file),
+    in SimpleITK's array order, with the geometry as SimpleITK reads the header (no pixels read by it)."""
+    import nibabel as nib
+    import SimpleITK as sitk
+
+    reader = sitk.ImageFileReader()
+    reader.SetFileName(str(path))
+    try:
+        reader.ReadImageInformation()
+        _check_size(path, reader.GetSize())
+        data = np.asarray(nib.load(str(path)).dataobj)
+    except Exception as exc:  # SimpleITK's RuntimeError, nibabel's many types for a damaged file
+        detail = _sitk_detail(exc) if isinstance(exc, RuntimeError) else f"{type(exc).__name__}: {exc}"
+        raise InputError(path, f"cannot read image ({detail})") from None
+    while data.ndim > 3 and data.shape[-1] == 1:
+        data = data[..., 0]
+    if data.ndim > 3:
+        raise InputError(path, f"is a {data.ndim}D image ({' x '.join(map(str, data.shape))}: {data.shape[3]} volumes, "
+                               f"e.g. a time series); extract one 3D volume first (e.g. sitk.Extract or fslroi)")
+    if data.dtype.names:
+        raise InputError(path, f"has {len(data.dtype.names)} components per voxel (colour or vector data); "
+                               f"registration needs one intensity per voxel")
+    d, n = data.ndim, reader.GetDimension()
+    direction = np.array(reader.GetDirection()).reshape(n, n)[:d, :d]
+    return data.T, reader.GetSpacing()[:d], reader.GetOrigin()[:d], direction
 
 
 def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
