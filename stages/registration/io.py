@@ -404,6 +404,9 @@ def read_pair(fixed_path: str | Path, moving_path: str | Path, params: LoadPairP
     paths = {"fixed": Path(fixed_path), "moving": Path(moving_path)}
     slices = {"fixed": params.fixed_slice, "moving": params.moving_slice}
     dims = {role: 2 if slices[role] is not None else image_dimension(p) for role, p in paths.items()}
+    for role in dims:
+        if dims[role] not in (2, 3):
+            read_image(paths[role])  # the reader's own message (a 4D series, a line of pixels)
     if dims["fixed"] != dims["moving"]:
         role = max(dims, key=dims.get)
         other = "moving" if role == "fixed" else "fixed"
@@ -419,26 +422,6 @@ def read_pair(fixed_path: str | Path, moving_path: str | Path, params: LoadPairP
 def load_pair(fixed_path: str, moving_path: str, *, params: LoadPairParams) -> LoadPairResult:
     """Read a fixed and a moving image: two 2D images (or slices) or two 3D volumes."""
     return LoadPairResult(*read_pair(fixed_path, moving_path, params))
-
-
-class LoadVolumeParams(Params):
-    """Parameters of the ``load_volume`` stage (none: the geometry comes from the file)."""
-
-
-@stage("load_volume", params=LoadVolumeParams, version=2, consumes=("path",), produces=("volume",))
-def load_volume(path: str, *, params: LoadVolumeParams) -> "LoadVolumeResult":
-    """Read one 3D volume (NIfTI, MetaImage, NRRD, DICOM) with its physical geometry."""
-    return LoadVolumeResult(read_volume(path))
-
-
-@dataclass(frozen=True, eq=False)
-class LoadVolumeResult(StageResult):
-    """One volume read from a file (the ``load_volume`` stage's state name, ``volume``)."""
-
-    volume: Image
-
-    def summary(self) -> dict:
-        return _describe(self.volume)
 
 
 def read_volume(path: str | Path) -> Image:
