@@ -28,14 +28,14 @@ Binning: ``bins`` equal-width bins over each image's own intensity range (:class
 from __future__ import annotations
 
 import copy
-import itertools
+import os
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
 from topomatch.stages.registration.image import Image
-from topomatch.stages.registration.interpolation import linear
+from topomatch.stages.registration.interpolation import corners, inside, linear
 from topomatch.stages.registration.transform import euler_matrix, n_angles
 
 try:
@@ -45,6 +45,19 @@ except ImportError:  # pragma: no cover - the extension is built on install; num
 
 Mode = Literal["linear", "parzen", "pv"]
 MODES = {"linear": 0, "parzen": 1, "pv": 2}
+PARALLEL_SAMPLES = 20000
+"""Samples from which the compiled pass splits its work over :func:`histogram_threads` threads (below, a thread's
+start costs more than it saves)."""
+
+
+def histogram_threads() -> int:
+    """Threads of the compiled pass: ``$OMP_NUM_THREADS`` when set (the engine's worker processes set it to 1),
+    else the CPUs this process may use, at most 4."""
+    env = os.environ.get("OMP_NUM_THREADS", "")
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(4, cpus))
 
 
 @dataclass(frozen=True)
@@ -132,6 +145,7 @@ class JointHistogram:
         self._mflat = np.ascontiguousarray((moving.data.ravel() - moving_binning.lo) * moving_binning.scale - 0.5)
         self._mbins = np.ascontiguousarray(moving_binning.index(moving.data).ravel(), dtype=np.int64)
         self._bmax = moving_binning.bins - 1
+        self.threads = histogram_threads() if self.n_samples >= PARALLEL_SAMPLES else 1
 
     def shuffled(self, seed: int = 0) -> "JointHistogram":
         """The same samples with their fixed intensities paired with other samples' (a fixed-seed permutation):
@@ -157,8 +171,7 @@ class JointHistogram:
 
     def overlap(self, theta) -> float:
         """Fraction of the samples whose ``T(p)`` lies inside the moving grid."""
-        U = self.positions(theta)
-        return float(np.mean(((U >= 0) & (U <= (np.asarray(self._size[: self.dim]) - 1.0)[:, None])).all(axis=0)))
+        return float(np.mean(inside(self.positions(theta), self._size[: self.dim])))
 
     def __call__(self, theta) -> tuple[np.ndarray, int]:
         """Joint histogram (fixed bins, moving bins) for ``theta`` and the number of samples inside the moving grid."""
@@ -167,28 +180,20 @@ class JointHistogram:
         A, b = self.index_map(theta)
         h0, h1 = np.zeros(self.n_cells + 1), np.zeros(self.n_cells + 1)
         n_inside = _compiled(A, b, self._P, self._mflat, self._mbins, self._size, self._fbk, self._bmax,
-                             MODES[self.mode], h0, h1)
+                             MODES[self.mode], h0, h1, self.threads)
         return (h0[: self.n_cells] + h1[: self.n_cells]).reshape(self.shape), int(n_inside)
 
     def histogram_numpy(self, theta) -> tuple[np.ndarray, int]:
         """:meth:`__call__` in numpy (2^d corners): the reference of the compiled pass, and its fallback."""
         U = self.positions(theta)
-        hi = (np.asarray(self._size[: self.dim]) - 1.0)[:, None]
-        inside = ((U >= 0) & (U <= hi)).all(axis=0)
-        U, fbk = U[:, inside], self._fbk[inside]
-        C0 = np.minimum(U.astype(np.intp), np.maximum(hi.astype(np.intp) - 1, 0))
-        F = U - C0
-        strides = np.cumprod((1,) + self._size[: self.dim - 1])[:, None]
-        weights, cells = [], []
-        for corner in itertools.product((0, 1), repeat=self.dim):
-            bit = np.array(corner)[:, None]
-            weights.append(np.prod(np.where(bit == 1, F, 1.0 - F), axis=0))
-            cells.append(((np.minimum(C0 + bit, hi.astype(np.intp))) * strides).sum(axis=0))
+        keep = inside(U, self._size[: self.dim])
+        neighbours = corners(U[:, keep], self._size[: self.dim])
+        fbk = self._fbk[keep]
         K = self.n_cells
         if self.mode == "pv":
-            h = sum(np.bincount(fbk + self._mbins[c], weights=w, minlength=K) for w, c in zip(weights, cells))
+            h = sum(np.bincount(fbk + self._mbins[c], weights=w, minlength=K) for w, c in neighbours)
         else:
-            val = sum(w * self._mflat[c] for w, c in zip(weights, cells))
+            val = sum(w * self._mflat[c] for w, c in neighbours)
             if self.mode == "linear":
                 h = np.bincount(fbk + np.clip(np.floor(val + 0.5).astype(np.intp), 0, self._bmax), minlength=K)
             else:
@@ -196,7 +201,7 @@ class JointHistogram:
                 m0 = np.minimum(val.astype(np.intp), max(self._bmax - 1, 0))
                 h = np.bincount(fbk + m0, weights=1.0 - (val - m0), minlength=K + 1)[:K]
                 h = h + np.bincount(fbk + m0 + 1, weights=val - m0, minlength=K + 1)[:K]
-        return np.asarray(h, dtype=np.float64).reshape(self.shape), int(np.count_nonzero(inside))
+        return np.asarray(h, dtype=np.float64).reshape(self.shape), int(np.count_nonzero(keep))
 
 
 def compiled() -> bool:

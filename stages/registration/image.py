@@ -177,6 +177,26 @@ def foreground_mask(image: Image) -> np.ndarray:
     return image.data > otsu_threshold(image.data)
 
 
+def grow(mask: np.ndarray, distance: float, spacing) -> np.ndarray:
+    """``mask`` grown by ``distance`` physical units along every axis (a box of half-widths ``distance /
+    spacing`` pixels, rounded: Chebyshev, not Euclidean, distance), by running maxima along each axis in numpy
+    (scipy's distance transform would cost a 3D registration a tenth of a second of import)."""
+    out = np.asarray(mask, dtype=bool).copy()
+    for axis, s in enumerate(spacing[::-1]):  # array axis, its spacing
+        r = int(round(distance / s))
+        grown = out.copy()
+        for shift in range(1, r + 1):
+            if shift >= out.shape[axis]:
+                break
+            lead = [slice(None)] * out.ndim
+            lag = [slice(None)] * out.ndim
+            lead[axis], lag[axis] = slice(shift, None), slice(None, -shift)
+            grown[tuple(lag)] |= out[tuple(lead)]
+            grown[tuple(lead)] |= out[tuple(lag)]
+        out = grown
+    return out
+
+
 def rms_radius(image: Image, mask: np.ndarray | None = None, max_points: int = 100_000) -> float:
     """RMS physical distance of the (masked) pixels from the grid's centre: a rotation by ``d`` radians moves
     them by about ``d * rms_radius`` (how angles and translations are put on one scale)."""

@@ -301,13 +301,13 @@ def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 
 def image_dimension(path: str | Path) -> int:
     """How many axes of more than one pixel the image at ``path`` has (from its header; 3 for a DICOM series
     folder, 2 for the Pillow formats). InputError if unreadable."""
-    import SimpleITK as sitk
-
     path = _checked(path)
     if path.is_dir():
         return 3
     if image_format(path) in PILLOW_SUFFIXES:
         return 2
+    import SimpleITK as sitk  # here: importing it costs ~0.06 s, a third of a 2D registration
+
     reader = sitk.ImageFileReader()
     reader.SetFileName(str(path))
     try:

@@ -36,7 +36,7 @@ import numpy as np
 
 from topomatch.pipeline.contract import StageError, StageResult, stage
 from topomatch.stages.registration.histogram import Binning, JointHistogram
-from topomatch.stages.registration.image import Image, foreground_mask, rms_radius
+from topomatch.stages.registration.image import Image, foreground_mask, grow, rms_radius
 from topomatch.stages.registration.objective import Objective
 from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_dimension
 from topomatch.stages.registration.powell import PowellSettings, powell_maximize
@@ -137,22 +137,27 @@ def initial_translation(fixed: Image, moving: Image, mode: str, angles=None) -> 
     centroid for ``'moments'``, grid centre for ``'geometry'``) onto the moving one; c the fixed centre."""
     if mode not in ("moments", "geometry"):
         raise ValueError(f"init must be 'moments' or 'geometry', got {mode!r}")
-    pf, pm = (fixed.centroid(), moving.centroid()) if mode == "moments" else (fixed.center, moving.center)
+    pf, pm = (_centroid(fixed), _centroid(moving)) if mode == "moments" else (fixed.center, moving.center)
     angles = np.zeros(n_angles(fixed.dim)) if angles is None else angles
     c = fixed.center
     return pm - c - euler_matrix(angles) @ (pf - c)
 
 
+def _centroid(image: Image) -> np.ndarray:
+    """The image's intensity centroid, computed once per image object (the start search asks for it often)."""
+    cached = image.__dict__.get("_centroid")
+    if cached is None:
+        cached = image.centroid()
+        object.__setattr__(image, "_centroid", cached)
+    return cached
+
+
 def sample_mask(fixed: Image, params: RegisterParams) -> np.ndarray | None:
-    """The fixed pixels the histograms sample (None: all): the Otsu foreground grown by ``sampling.margin``."""
+    """The fixed pixels the histograms sample (None: all): the Otsu foreground grown by ``sampling.margin``
+    (:func:`~topomatch.stages.registration.image.grow`)."""
     if params.sampling.region == "all":
         return None
-    mask = foreground_mask(fixed)
-    if params.sampling.margin > 0:
-        from scipy.ndimage import distance_transform_edt
-
-        mask = distance_transform_edt(~mask, sampling=fixed.spacing[::-1]) <= params.sampling.margin
-    return mask
+    return grow(foreground_mask(fixed), params.sampling.margin, fixed.spacing)
 
 
 @dataclass(frozen=True)

@@ -192,7 +192,8 @@ def grid_search(images: SearchImages, rotations: np.ndarray, translation_at: Cal
                 steps: int, half_width: float, polish: int = 10, polish_rotations=((),)) -> GridSearch:
     """Score every rotation (rows of ``rotations``, Euler angles) x a ``steps``^d translation grid of half-width
     about ``half_width`` (whole search pixels) about ``translation_at(angles)``; then polish the ``polish``
-    best cells with a grid one search pixel apart inside each, at each rotation offset of ``polish_rotations``
+    best cells with a grid one search pixel apart about each (up to 2 pixels away), at each rotation offset of
+    ``polish_rotations``
     (peaks of multimodal pairs are narrower than a cell).
 
     The returned thetas and values are the coarse grid followed by the polished points.
@@ -206,7 +207,7 @@ def grid_search(images: SearchImages, rotations: np.ndarray, translation_at: Cal
         thetas.append(th)
         values.append(v)
     coarse_thetas, coarse_values = np.vstack(thetas), np.concatenate(values)
-    half = np.arange(-(step // 2), step // 2 + 1)
+    half = np.arange(-min(step // 2, 2), min(step // 2, 2) + 1)  # at most 5 per axis: 125 translations in 3D
     for i in np.argsort(-coarse_values, kind="stable")[:polish]:
         if not math.isfinite(coarse_values[i]):
             break
