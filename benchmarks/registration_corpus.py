@@ -4,6 +4,7 @@ Usage::
 
     .venv/bin/python benchmarks/registration_corpus.py --list                 # the cases per split/dim/source/kind
     .venv/bin/python benchmarks/registration_corpus.py --selftest             # the scoring and the case geometry
+    .venv/bin/python benchmarks/registration_corpus.py --generate             # build every case, no registration
     TOPOMATCH_DATA_ROOT=/work/shared/data .venv/bin/python benchmarks/registration_corpus.py \\
         [--split tune|report|all] [--dims 2,3] [--methods ours,elastix,simpleitk] [--metrics jt,jr,mi,tmi] \\
         [--kinds t1,labels] [--sources mni,kmeans] [--limit N] [--cases-scale 1.0] [--cache DIR] \\
@@ -30,8 +31,10 @@ Sources (public data, read where it is installed; nothing is copied into the rep
 - 2D ``itk``: the bundled ITK slices ``BrainT1Slice.png`` (the fixed image, head with skull) and
   ``BrainProtonDensitySlice.png`` (the same slice in PD contrast, used by the ``pd`` kind), 1 pixel units.
 
-Sources without tissue fractions (``kmeans``, ``anatomical``, ``itk``) use the head (or brain) mask =
-Otsu foreground, holes filled, largest component, and three foreground classes by a two-threshold Otsu.
+Sources without tissue fractions (``kmeans``, ``anatomical``, ``itk``) use as mask the largest component of
+the Otsu foreground with its holes filled (``kmeans``: the head; ``itk``: the brain, which its dark skull
+cuts off from the scalp; ``anatomical``: most of its brain-only field of view) and three foreground classes
+by a two-threshold Otsu (for ``labels``).
 
 Moving-image kinds (:data:`KIND_MAKERS`; the fixed image is the source's T1 with noise unless swapped):
 
@@ -41,25 +44,26 @@ Moving-image kinds (:data:`KIND_MAKERS`; the fixed image is the source's T1 with
   x 200); without fractions ``misalign.t2_like`` for T2 and :func:`pd_like` (its compressed mirror:
   CSF > GM > WM, 1.0 ... 0.78) for PD; ``itk`` uses its real PD slice.
 - ``labels``: a label map (0 background, 1 CSF, 2 GM, 3 WM: the largest fraction, or the Otsu classes).
-- ``silhouette``: the brain (MNI) or head mask at one value (1), dilated by 0-3 voxels, plus noise.
+- ``silhouette``: the mask (MNI: the brain) at one value (1), dilated by 0-3 voxels (drawn), plus noise.
 - ``threshold``: the T1 (with its bias field and noise) above a percentile drawn in [20, 80] of its
   foreground: binary 0 / 1.
 - ``saturated``: the T1 clipped at a percentile drawn in [5, 20] of its foreground (near uniform inside
   the object), plus noise.
 
-A third of the ``labels`` and ``silhouette`` cases are *swapped*: the fixed image is the label map or
-silhouette of the source, the moving one the moved T1 (with the degradations).
+A third of the ``labels`` and ``silhouette`` cases of each source (the 2nd, 5th, 8th ... of the kind) are
+*swapped*: the fixed image is the label map or silhouette of the source, the moving one the moved T1 (with
+the degradations).
 
-Degradations, drawn per case: Gaussian noise of U(1, 3) % of the image's range (99.5th percentile minus minimum) on the fixed and
-the moving image (each its own level; none on labels, and the binary threshold image gets it before thresholding);
-a multiplicative bias field on the moving image (half the cases: ``1 + a f`` with ``f`` a random
-quadratic of the grid coordinates normalised to max |f| = 1, ``a`` in [0.1, 0.2]: +-10 to 20 %); thick
-slices (3D, 30 %: every map smoothed along the third axis to 4 mm slices and resampled to 2 x 2 x 4 mm
-before the kind is made); a partial field of view (25 %: the moving image cropped by
-``misalign.crop_slab`` to a 60-80 % slab along a random axis). The rigid T: each translation uniform in
+Degradations, drawn per case: Gaussian noise of U(1, 3) % of the image's range (99.5th percentile minus
+minimum) on the fixed and the moving image (each its own level; none on labels, and the binary threshold
+image gets it before thresholding); a multiplicative bias field on the moving image (half the cases:
+``1 + a f`` with ``f`` a random quadratic of the grid coordinates normalised to max |f| = 1, ``a`` in
+[0.1, 0.2]: +-10 to 20 %); thick slices (3D, 30 %: every map smoothed along the third axis to 4 mm slices
+and resampled to 2 x 2 x 4 mm before the kind is made); a partial field of view (25 %: the moving image
+cropped by ``misalign.crop_slab`` to a 60-80 % slab along a random axis). The rigid T: each translation uniform in
 +-15 (mm; pixels for ``itk``), each angle in +-15 deg (3D) or +-20 deg (2D), about the fixed grid's centre
 (``misalign.random_transform``). The moved maps are resampled by cubic B-spline (T1, PD) or linearly
-(fractions, mask), zero (the map's minimum) outside.
+(fractions, mask), the map's minimum outside.
 
 Seeding: case ``i`` of a (split, source, dimension) draws everything from
 ``numpy.random.default_rng([SEEDS[split, source, dim], i])`` (noise from ``[seed, i, 1]``), always in the same
@@ -139,6 +143,7 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("report", "mni-axial", 2): 2102, ("report", "mni-coronal", 2): 2402,
          ("report", "mni-sagittal", 2): 2502, ("report", "itk", 2): 2602}
 
+SPLIT_ORDER = {"tune": 0, "report": 1}
 SWAPPABLE = ("labels", "silhouette")
 TISSUES = ("csf", "gm", "wm")
 T2_VALUES = (1.0, 0.45, 0.30)
@@ -362,8 +367,8 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     rng = np.random.default_rng([seed, index])
     kinds = KINDS[split]
     kind = kinds[(index + place) % len(kinds)]
+    swapped = kind in SWAPPABLE and (index + place) // len(kinds) % 3 == 1  # the 2nd, 5th, 8th ... of its kind
     truth = random_transform(rng, (0.0,) * dim, max_angle=MAX_ANGLE[dim], max_translation=MAX_TRANSLATION)
-    swapped = bool(rng.uniform() < 1.0 / 3.0) and kind in SWAPPABLE
     noise_fixed, noise_moving = (float(v) for v in rng.uniform(0.01, 0.03, size=2))
     bias_on, bias_amplitude, bias_coefficients = rng.uniform() < 0.5, float(rng.uniform(0.1, 0.2)), rng.normal(size=9)
     thick = bool(rng.uniform() < 0.3) and dim == 3
@@ -379,7 +384,8 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     if source.startswith("mni-"):
         section = {"position": position, "spacing": spacing, "frame": frame}
         if frame == "crop":
-            section.update(crop_fractions=[float(v) for v in crop_fractions], crop_starts=[float(v) for v in crop_starts])
+            section.update(crop_fractions=[float(v) for v in crop_fractions],
+                           crop_starts=[float(v) for v in crop_starts])
         elif frame == "pad":
             section.update(pads=[int(v) for v in pads])
     return CaseSpec(
@@ -529,14 +535,22 @@ def maps_needed(kind: str, f: Fields) -> set[str]:
 def moved_fields(f: Fields, truth: RigidTransform, names: set[str]) -> Fields:
     """The maps ``names`` moved by T on the source's grid: ``map(T^-1(q))`` (cubic for T1/PD, linear for the
     fractions and the mask), the map's minimum where ``T^-1(q)`` leaves the grid."""
-    index = f.grid.continuous_index(truth.inverse().apply(f.grid.points())).T  # (d, n), ITK order
-    inside = ((index >= 0) & (index <= (np.asarray(f.grid.size) - 1.0)[:, None])).all(axis=0).reshape(f.grid.shape)
+    maps = sample_maps(f, names, f.grid, truth.inverse(), cubic=CUBIC_MAPS)
+    return f.on(f.grid.with_data(maps["t1"]), maps)
+
+
+def sample_maps(f: Fields, names, reference: Image, transform: RigidTransform, cubic=()) -> dict[str, np.ndarray]:
+    """The maps ``names`` of ``f`` at ``transform(p)`` for the pixels p of ``reference`` (the map's minimum outside
+    its grid): the values of ``interpolation.resample`` (N-linear, or its clipped cubic B-spline for ``cubic``),
+    by scipy's ``map_coordinates`` computed once per case (4x faster on a 3D map)."""
+    index = f.grid.continuous_index(transform.apply(reference.points())).T  # (d, n), ITK order
+    inside = ((index >= 0) & (index <= (np.asarray(f.grid.size) - 1.0)[:, None])).all(axis=0).reshape(reference.shape)
     maps = {}
     for k, v in f.maps.items():
-        if k in names:  # scipy's N-linear map_coordinates: the same values as ``resample``'s, 4x faster here
-            values = ndimage.map_coordinates(v, index[::-1], order=3 if k in CUBIC_MAPS else 1, mode="nearest")
-            maps[k] = np.where(inside, np.clip(values.reshape(v.shape), v.min(), v.max()), float(v.min()))
-    return f.on(f.grid.with_data(maps["t1"]), maps)
+        if k in names:
+            values = ndimage.map_coordinates(v, index[::-1], order=3 if k in cubic else 1, mode="nearest")
+            maps[k] = np.where(inside, np.clip(values.reshape(reference.shape), v.min(), v.max()), float(v.min()))
+    return maps
 
 
 def thick_slices(f: Fields) -> Fields:
@@ -546,16 +560,16 @@ def thick_slices(f: Fields) -> Fields:
     sigma_mm = math.sqrt(max(THICK_SLICE_MM ** 2 - s[2] ** 2, 0.0)) / 2.3548
     n_new = int((f.grid.size[2] - 1) * s[2] // THICK_SLICE_MM) + 1
     ref = Image(np.zeros((n_new,) + f.grid.shape[1:]), (s[0], s[1], THICK_SLICE_MM), f.grid.origin, f.grid.direction)
-    identity = RigidTransform.identity(f.grid.center)
-    maps = {}
-    for k, v in f.maps.items():
-        smooth = ndimage.gaussian_filter1d(v, sigma_mm / s[2], axis=0, mode="nearest") if sigma_mm > 0 else v
-        maps[k] = resample(f.grid.with_data(smooth), identity, ref, order=1, fill=float(v.min()))
+    smooth = f.on(f.grid, {k: ndimage.gaussian_filter1d(v, sigma_mm / s[2], axis=0, mode="nearest")
+                           if sigma_mm > 0 else v for k, v in f.maps.items()})
+    maps = sample_maps(smooth, set(f.maps), ref, RigidTransform.identity(f.grid.center))
     return f.on(ref.with_data(maps["t1"]), maps)
 
 
 @dataclass(frozen=True, eq=False)
 class Case:
+    """A built case: its spec, the two images and the true T (about the fixed grid's centre)."""
+
     spec: CaseSpec
     fixed: Image
     moving: Image
@@ -713,7 +727,7 @@ def mean_tre(estimate: RigidTransform, truth: RigidTransform, fixed: Image) -> f
 
 def named(t: RigidTransform) -> dict[str, float]:
     """Parameters by name, angles in degrees."""
-    return {n: round(float(v), 6) for n, v in zip(t.names, (*t.angles_deg, *t.translation))}
+    return {n: _finite(round(float(v), 6)) for n, v in zip(t.names, (*t.angles_deg, *t.translation))}
 
 
 def score(case: Case, fixed: Image, method: str, result: Result) -> dict:
@@ -721,7 +735,7 @@ def score(case: Case, fixed: Image, method: str, result: Result) -> dict:
     spec = case.spec
     truth = case.truth.with_center(fixed.center)
     est = result.transform.with_center(fixed.center) if result.transform is not None else None
-    tre = mean_tre(est, truth, fixed) if est is not None else None
+    tre = _finite(mean_tre(est, truth, fixed)) if est is not None else None  # None: no answer (wrong)
     return {"case": spec.id, "split": spec.split, "dim": spec.dim, "source": spec.source, "kind": spec.kind,
             "swapped": spec.swapped, "degradations": spec.degradations(), "method": method,
             "truth": named(truth), "estimate": named(est) if est is not None else None, "center": list(fixed.center),
@@ -739,6 +753,11 @@ def subsets(row: dict) -> list[str]:
     return out + [f"deg:{d}" for d in row["degradations"] if d in ("swapped", "crop", "thick")]
 
 
+def _finite(x: float) -> float | None:
+    """``x``, or None (JSON null) when it is not finite (a median over failed runs, a NaN answer)."""
+    return x if math.isfinite(x) else None
+
+
 def summarise(rows: list[dict]) -> dict:
     """Counts per split x dim x subset x method, and per split x dim the cases ours gets wrong where elastix is
     right."""
@@ -750,18 +769,19 @@ def summarise(rows: list[dict]) -> dict:
     for (split, dim, subset, method), rs in groups.items():
         tres = [r["tre"] if r["tre"] is not None else math.inf for r in rs]
         table.append({"split": split, "dim": dim, "subset": subset, "method": method, "cases": len(rs),
-                      "within_1": sum(correct(r) for r in rs), "median_tre": statistics.median(tres),
+                      "within_1": sum(correct(r) for r in rs), "median_tre": _finite(statistics.median(tres)),
                       "median_seconds": statistics.median(r["seconds"] for r in rs),
                       "false_flags": sum(correct(r) and not r["ok"] for r in rs),
                       "flagged_wrong": sum(not correct(r) and not r["ok"] for r in rs),
                       "silent_wrong": sum(not correct(r) and r["ok"] for r in rs)})
     order = {"all": 0, "kind": 1, "source": 2, "deg": 3}
-    table.sort(key=lambda t: (t["split"], t["dim"], order[t["subset"].split(":")[0]], t["subset"], t["method"]))
+    table.sort(key=lambda t: (SPLIT_ORDER[t["split"]], t["dim"], order[t["subset"].split(":")[0]], t["subset"],
+                              t["method"]))
     by_case: dict[str, dict[str, dict]] = {}
     for r in rows:
         by_case.setdefault(r["case"], {})[r["method"]] = r
     versus = []
-    for split, dim in sorted({(r["split"], r["dim"]) for r in rows}):
+    for split, dim in sorted({(r["split"], r["dim"]) for r in rows}, key=lambda k: (SPLIT_ORDER[k[0]], k[1])):
         for method in sorted({r["method"] for r in rows if r["method"].startswith("ours-")}):
             both = [c for c in by_case.values() if method in c and "elastix" in c
                     and c[method]["split"] == split and c[method]["dim"] == dim]
@@ -784,8 +804,9 @@ def print_summary(summary: dict) -> None:
         if last is not None and key[:2] != last[:2]:
             print()
         last = key
+        median_tre = t["median_tre"] if t["median_tre"] is not None else math.inf
         print(f"{t['split']:7s} {t['dim']:>3d} {t['subset']:22s} {t['method']:10s} {t['cases']:5d} {t['within_1']:7d} "
-              f"{t['median_tre']:8.3f} {t['median_seconds']:7.2f} {t['false_flags']:9d} {t['flagged_wrong']:9d} "
+              f"{median_tre:8.3f} {t['median_seconds']:7.2f} {t['false_flags']:9d} {t['flagged_wrong']:9d} "
               f"{t['silent_wrong']:11d}")
     if summary["versus_elastix"]:
         print("\nelastix right (TRE <= 1), ours wrong (and the reverse):")
@@ -815,7 +836,7 @@ def list_cases(args) -> None:
     if anatomical_path() is None:
         print("TOPOMATCH_DATA_ROOT not set (or anatomical.nii missing): the anatomical cases are left out")
     cases = selected_cases(args)
-    for split in sorted({c.split for c in cases}):
+    for split in sorted({c.split for c in cases}, key=SPLIT_ORDER.get):
         for dim in sorted({c.dim for c in cases if c.split == split}):
             sub = [c for c in cases if c.split == split and c.dim == dim]
             kinds = KINDS[split]
@@ -830,7 +851,7 @@ def list_cases(args) -> None:
 
 def warm_up(runners: dict, cases: list[CaseSpec], folder: Path) -> None:
     """Each method once per dimension on the first case of that dimension, untimed: one-time start-up costs
-    (ITK's modules for elastix, ~20 s; our compiled kernels) stay out of the timings."""
+    (ITK's lazily loaded modules for elastix, SimpleITK's import, our first call) stay out of the timings."""
     for dim in sorted({c.dim for c in cases}):
         spec = next(c for c in cases if c.dim == dim)
         fp, mp, fixed, moving = write_case(build_case(spec), folder / "warm-up")
@@ -850,7 +871,7 @@ def save_json(path: Path, out: dict) -> None:
     """Write atomically (a crash or an interrupt keeps the last complete file)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(out, indent=1))
+    tmp.write_text(json.dumps(out, indent=1, allow_nan=False))
     tmp.replace(path)
 
 
@@ -973,6 +994,34 @@ def _selftest_case(spec: CaseSpec, folder: Path) -> int:
     return int(not ok_tre) + int(not ok_geom)
 
 
+def generate(args) -> None:
+    """Build and write every selected case (no registration): each must pass ``read_image``'s checks and keep its
+    geometry in the file."""
+    cases = selected_cases(args)
+    folder = args.cache or Path(tempfile.mkdtemp(prefix="registration_corpus_"))
+    t0, failures = time.perf_counter(), 0
+    try:
+        for n, spec in enumerate(cases, 1):
+            try:
+                fp, mp, fixed, moving = write_case(build_case(spec), folder)
+            except Exception as exc:  # noqa: BLE001
+                failures += 1
+                print(f"[{n}/{len(cases)}] {spec.id} {spec.kind}: FAILED {type(exc).__name__}: {exc}", flush=True)
+                continue
+            print(f"[{n}/{len(cases)} {time.perf_counter() - t0:.0f}s] {spec.id} {spec.kind} "
+                  f"[{', '.join(spec.degradations())}] fixed {fixed.shape} moving {moving.shape} "
+                  f"spacing {tuple(round(v, 2) for v in moving.spacing)}", flush=True)
+            if args.cache is None:
+                fp.unlink()
+                mp.unlink()
+    finally:
+        if args.cache is None:
+            shutil.rmtree(folder, ignore_errors=True)
+    print(f"{len(cases) - failures} of {len(cases)} cases generated in {time.perf_counter() - t0:.0f} s")
+    if failures:
+        raise SystemExit(1)
+
+
 def _mid(image: Image) -> np.ndarray:
     return image.data if image.dim == 2 else image.data[image.shape[0] // 2]
 
@@ -1018,6 +1067,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--list", action="store_true", help="print the case counts and stop")
     ap.add_argument("--selftest", action="store_true", help="check the scoring and the case geometry and stop")
     ap.add_argument("--montage", type=Path, default=None, help="save a PNG of the selected cases and stop")
+    ap.add_argument("--generate", action="store_true", help="build and write the selected cases (no registration)")
     args = ap.parse_args(argv)
     args.dims = [int(d) for d in args.dims.split(",") if d]
     args.methods = [m for m in args.methods.split(",") if m]
@@ -1033,6 +1083,8 @@ def main(argv: list[str] | None = None) -> None:
         selftest(args)
     elif args.montage:
         montage(args, args.montage)
+    elif args.generate:
+        generate(args)
     else:
         run(args)
 

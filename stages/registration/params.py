@@ -168,6 +168,11 @@ class CheckSpec(Params):
                                description="flag a result at which a coarser level's measure is lower than at that "
                                            "level's own end by more than this fraction of it: a finer level walked "
                                            "away from the basin the coarser one found")
+    agreement: float = Field(1.0, ge=0, allow_inf_nan=False,
+                             description="flag a result farther than this (physical units) from the optimum of the "
+                                         "thesis's measure (JT, alpha 2, histogram weights) climbed from it at the "
+                                         "finest level: a measure whose own optimum is biased (0: off; no effect "
+                                         "with that measure)")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
     refine: int = Field(20, ge=0, description="coarsest-level iterations from each probe before the comparison")

@@ -422,15 +422,15 @@ def check_gain(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
     """A finer level walked away from the basin a coarser one found: at the result, some coarser level's measure
-    is lower than at that level's own end by more than ``check.consistency`` of it (and the two ends are more
-    than that level's spacing apart)."""
+    is lower than at that level's own end by more than ``check.consistency`` of it (and the two are more than a
+    quarter of that level's spacing apart: a coarse optimum is as good as its pixels)."""
     threshold = run.params.check.consistency
     if threshold <= 0 or len(run.ends) != len(run.levels):
         return []
     for li in range(len(run.levels) - 1):
         objective, spacing = run.levels[li].objective, run.levels[li].spacing
         there, here = objective(run.ends[li]), objective(theta)
-        if math.isfinite(there) and there > 0 and run.distance(theta, run.ends[li]) > spacing \
+        if math.isfinite(there) and there > 0 and run.distance(theta, run.ends[li]) > 0.25 * spacing \
                 and not here >= (1.0 - threshold) * there:
             drop = 1.0 - here / there if math.isfinite(here) else 1.0
             return [Flag("consistency", f"the finer levels left the basin that the {spacing:g}-unit level found "
@@ -438,6 +438,24 @@ def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
                                         f"measure is {drop:.0%} lower; consistency {threshold:.0%}): the finest "
                                         f"measure has no clear optimum at the coarse answer")]
     return []
+
+
+def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
+    """The chosen measure's optimum is not the thesis's: from the result, the finest level's schedule entry climbs
+    Jensen-Tsallis (alpha 2, histogram weights) on the same samples, and ends more than ``check.agreement`` away
+    (a measure with a biased optimum: Tsallis MI on multimodal pairs). Nothing to compare for JT itself."""
+    m, limit = run.params.metric, run.params.check.agreement
+    if limit <= 0 or (m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"):
+        return []
+    finest = run.levels[-1]
+    jt = Objective(finest.objective.histogram, "jt", alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
+    lower, upper = run.lower, run.upper
+    end = run.optimize(len(run.levels) - 1, finest.spec, theta, lower=lower, upper=upper, objective=jt).theta
+    if jt(end) <= jt(theta) or run.distance(end, theta) <= limit:
+        return []
+    return [Flag("agreement", f"the optimum of Jensen-Tsallis (alpha 2, the thesis's measure) is "
+                              f"{run.distance(end, theta):.2f} units from the result of {m.label()} (agreement "
+                              f"{limit:g}): this measure's optimum is biased on these images")]
 
 
 def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
@@ -546,8 +564,8 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 CHECKS: tuple[Callable[..., list[Flag]], ...] = (check_start, check_overlap, check_bounds, check_chance, check_gain,
-                                                  check_consistency, check_overlap_bound, check_content,
-                                                  check_prominence, check_flatness, check_capture)
+                                                  check_consistency, check_agreement, check_overlap_bound,
+                                                  check_content, check_prominence, check_flatness, check_capture)
 """The self-check, in order; after ``check_overlap`` flags an undefined measure nothing else is asked."""
 
 

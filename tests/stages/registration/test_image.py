@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from topomatch.stages.registration.image import Image, foreground_mask, otsu_threshold, rms_radius
+from topomatch.stages.registration.image import Image, foreground_mask, grow, otsu_threshold, rms_radius
 
 SimpleITK = pytest.importorskip("SimpleITK")
 
@@ -108,3 +108,18 @@ def test_bad_geometry_is_refused():
         Image(np.zeros((4, 4)), spacing=(1.0, 0.0))
     with pytest.raises(ValueError, match="singular"):
         Image(np.zeros((4, 4)), direction=np.zeros((2, 2)))
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_grow_is_a_box_of_half_width_distance_over_spacing(d):
+    shape = (9, 11) if d == 2 else (9, 11, 7)
+    mask = np.zeros(shape, bool)
+    centre = tuple(n // 2 for n in shape)
+    mask[centre] = True
+    spacing = (1.0, 2.0, 0.5)[:d]  # ITK order: x (the last array axis) first
+    grown = grow(mask, 2.0, spacing)
+    half = [int(round(2.0 / s)) for s in spacing][::-1]  # array order
+    expected = np.zeros(shape, bool)
+    expected[tuple(slice(c - h, c + h + 1) for c, h in zip(centre, half))] = True
+    np.testing.assert_array_equal(grown, expected)
+    np.testing.assert_array_equal(grow(mask, 0.0, spacing), mask)

@@ -186,3 +186,62 @@ def test_params_are_validated():
         RegisterParams.parse({"metric": {"alpha": 0}}, "register")
     with pytest.raises(ConfigError, match="register.sampling.region"):
         RegisterParams.parse({"sampling": {"region": "brain"}}, "register")
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_initial_translations_map_the_reference_points(d):
+    from topomatch.stages.registration.register import initial_translation
+    from topomatch.stages.registration.transform import euler_matrix
+
+    shape = (20, 30) if d == 2 else (12, 14, 16)
+    data = np.zeros(shape)
+    data[tuple(slice(2, 6) for _ in range(d))] = 10.0
+    fixed = Image(data, spacing=(1.0, 2.0, 1.5)[:d], origin=(3.0, -1.0, 2.0)[:d])
+    moving = Image(np.roll(data, 3, axis=0), spacing=(0.5, 1.0, 1.0)[:d], origin=(-7.0, 4.0, 0.0)[:d])
+    k = 1 if d == 2 else 3
+    angles = np.full(k, 0.3)
+    t = initial_translation(fixed, moving, "moments", angles)
+    R, c = euler_matrix(angles), fixed.center
+    np.testing.assert_allclose(R @ (fixed.centroid() - c) + c + t, moving.centroid(), atol=1e-9)
+    np.testing.assert_allclose(initial_translation(fixed, moving, "geometry"), moving.center - fixed.center)
+
+
+def test_sample_mask_grows_the_foreground_by_the_margin():
+    from topomatch.stages.registration.params import for_dimension
+    from topomatch.stages.registration.register import sample_mask
+
+    data = np.zeros((30, 40))
+    data[10:20, 15:25] = 100.0
+    image = Image(data, spacing=(2.0, 2.0))
+    assert sample_mask(image, for_dimension(RegisterParams(), 2)) is None  # 2D default: every pixel
+    grown = sample_mask(image, for_dimension(RegisterParams(sampling={"region": "foreground", "margin": 4.0}), 2))
+    assert grown.sum() == (10 + 4) * (10 + 4)  # two pixels of 2 mm on every side
+
+
+def test_objective_is_undefined_below_the_overlap_and_weighted_above():
+    from topomatch.stages.registration.histogram import Binning, JointHistogram
+    from topomatch.stages.registration.objective import Objective
+
+    image = Image(np.add.outer(np.arange(20.0), np.arange(30.0)) % 7)
+    b = Binning.of(image.data, 8)
+    jh = JointHistogram(image, image, b, b, center=image.center, mode="linear")
+    plain = Objective(jh, "mi", min_overlap=0.5)
+    weighted = Objective(jh, "mi", min_overlap=0.5, overlap_power=1.0)
+    shift = np.array([0.0, 10.0, 0.0])  # a third of the columns leave the moving grid
+    assert jh.overlap(shift) == pytest.approx(20 / 30)
+    assert weighted(shift) == pytest.approx(plain(shift) * 20 / 30)
+    assert plain(np.array([0.0, 20.0, 0.0])) == -math.inf  # a third of the samples is below min_overlap
+
+
+def test_before_after_of_the_identity_is_the_moving_image():
+    from topomatch.stages.registration.reports import before_after, planes
+    from topomatch.stages.registration.transform import RigidTransform
+
+    vol = Image(np.random.default_rng(0).random((6, 7, 8)), spacing=(1.0, 2.0, 3.0))
+    identity = RigidTransform.identity(tuple(vol.center))
+    before, after = before_after(vol, vol, identity)
+    np.testing.assert_allclose(before, vol.data, atol=1e-12)
+    np.testing.assert_allclose(after, vol.data, atol=1e-12)
+    views = planes(vol)
+    assert [v[1].shape for v in views] == [(7, 8), (6, 8), (6, 7)] and views[1][2] == pytest.approx(3.0)
+    assert len(planes(Image(np.zeros((5, 6))))) == 1
