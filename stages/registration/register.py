@@ -90,6 +90,10 @@ class Registration:
         Fraction of the finest level's fixed samples inside the moving image at the result.
     restarts : int
         Runs of the schedule adopted after the first (a capture-check retry).
+    measures : dict of float
+        What each self-check test measured at the result, flagged or not (``chance``: the measure over its chance
+        level; ``consistency``: the largest relative drop of a coarser level's measure; ``agreement``: the
+        distance to JT's optimum; ``content``, ``prominence``, ``flatness``): the numbers its thresholds compare.
     """
 
     transform: RigidTransform
@@ -104,6 +108,7 @@ class Registration:
     initial: RigidTransform | None = None
     overlap: float = math.nan
     restarts: int = 0
+    measures: dict[str, float] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -399,11 +404,11 @@ def check_bounds(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_chance(run: _Run, theta, value, stop) -> list[Flag]:
     """The measure is near what the same samples give paired at random: no shared structure."""
-    if run.params.check.chance <= 0:
-        return []
     fine = run.levels[-1].objective
     chance = fine.on(fine.histogram.shuffled(run.params.seed))(theta)
-    if math.isfinite(chance) and chance > 0 and value < run.params.check.chance * chance:
+    if math.isfinite(chance) and chance > 0:
+        run.measures["chance"] = value / chance
+    if run.params.check.chance > 0 and math.isfinite(chance) and chance > 0 and value < run.params.check.chance * chance:
         return [Flag("chance", f"the measure at the result ({value:.3g}) is only {value / chance:.2f} times its chance "
                                f"level ({chance:.3g}: the same samples paired at random): the images share no "
                                f"structure that this measure can align")]
@@ -425,14 +430,17 @@ def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
     is lower than at that level's own end by more than ``check.consistency`` of it (and the two are more than a
     quarter of that level's spacing apart: a coarse optimum is as good as its pixels)."""
     threshold = run.params.check.consistency
-    if threshold <= 0 or len(run.ends) != len(run.levels):
+    if len(run.ends) != len(run.levels):
         return []
+    worst = -math.inf
     for li in range(len(run.levels) - 1):
         objective, spacing = run.levels[li].objective, run.levels[li].spacing
         there, here = objective(run.ends[li]), objective(theta)
-        if math.isfinite(there) and there > 0 and run.distance(theta, run.ends[li]) > 0.25 * spacing \
-                and not here >= (1.0 - threshold) * there:
-            drop = 1.0 - here / there if math.isfinite(here) else 1.0
+        if not (math.isfinite(there) and there > 0 and run.distance(theta, run.ends[li]) > 0.25 * spacing):
+            continue
+        drop = 1.0 - here / there if math.isfinite(here) else 1.0
+        worst = run.measures["consistency"] = max(worst, drop)
+        if threshold > 0 and drop > threshold:
             return [Flag("consistency", f"the finer levels left the basin that the {spacing:g}-unit level found "
                                         f"({run.distance(theta, run.ends[li]):.1f} units away, where that level's "
                                         f"measure is {drop:.0%} lower; consistency {threshold:.0%}): the finest "
@@ -451,7 +459,8 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     jt = Objective(finest.objective.histogram, "jt", alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
     lower, upper = run.lower, run.upper
     end = run.optimize(len(run.levels) - 1, finest.spec, theta, lower=lower, upper=upper, objective=jt).theta
-    if jt(end) <= jt(theta) or run.distance(end, theta) <= limit:
+    run.measures["agreement"] = run.distance(end, theta) if jt(end) > jt(theta) else 0.0
+    if run.measures["agreement"] <= limit:
         return []
     return [Flag("agreement", f"the optimum of Jensen-Tsallis (alpha 2, the thesis's measure) is "
                               f"{run.distance(end, theta):.2f} units from the result of {m.label()} (agreement "
@@ -480,9 +489,9 @@ def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_content(run: _Run, theta, value, stop) -> list[Flag]:
     """Too little of the fixed image's content lands on the moving image's content."""
-    if run.params.check.min_content <= 0:
+    if not run.params.check.search:
         return []
-    content = run.search_images().content_overlap(theta)
+    content = run.measures["content"] = run.search_images().content_overlap(theta)
     if content < run.params.check.min_content:
         return [Flag("content", f"only {content:.1%} of the fixed image's content (Otsu foreground) lands on the "
                                 f"moving image's content at the result (min_content "
@@ -492,9 +501,9 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
     """The result does not stand out of the coarse search's landscape."""
-    if run.params.check.min_prominence <= 0:
+    if not run.params.check.search:
         return []
-    prominence = run.grid().prominence(run.search_images().score(theta, min_overlap=0.0))
+    prominence = run.measures["prominence"] = run.grid().prominence(run.search_images().score(theta, min_overlap=0.0))
     if prominence < run.params.check.min_prominence:
         return [Flag("prominence", f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
                                    f"deviations above a typical transform of a coarse search (min_prominence "
@@ -504,15 +513,16 @@ def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
     """Some combination of the parameters is undetermined (:func:`~topomatch.stages.registration.search.flatness`
-    on a copy of the images scaled to the fixed content, 2 and 6 of its pixels from the result, angles as arcs at
-    the content's RMS radius)."""
+    on a copy of the images scaled to the fixed content, 6 of its pixels from the result, angles as arcs at the
+    content's RMS radius)."""
     threshold = run.params.check.min_flatness
     if threshold <= 0:
         return []
     images = run.search_images(content=True)
     radius = rms_radius(run.fixed, foreground_mask(run.fixed))
-    ratio, u = flatness(lambda t: images.score(t, min_overlap=0.0), theta, dim=run.dim, step=2.0 * images.spacing,
-                        reach=6.0 * images.spacing, radius=radius)
+    ratio, u = flatness(lambda t: images.score(t, min_overlap=0.0), theta, dim=run.dim, reach=6.0 * images.spacing,
+                        radius=radius)
+    run.measures["flatness"] = ratio
     if ratio >= threshold:
         return []
     u = u * np.sign(u[np.abs(u).argmax()])
@@ -577,7 +587,7 @@ def describe(t: RigidTransform) -> str:
 
 def self_check(run: _Run, theta: np.ndarray, value: float, stop: str) -> list[Flag]:
     """The flags of every test of :data:`CHECKS` at the result; ``run.better`` is the capture test's better end."""
-    run.better = None
+    run.better, run.measures = None, {}
     flags: list[Flag] = []
     for check in CHECKS:
         flags += check(run, theta, value, stop)
@@ -639,7 +649,8 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     reg = Registration(transform, float(value), tuple(flags), params.method(), time.perf_counter() - t0,
                        int(len(history["level"])), sum({id(lv.objective): lv.objective.n_evals
                                                          for lv in run.levels}.values()), stop, history,
-                       RigidTransform(tuple(run.start), tuple(run.center)), fine.overlap(theta), restarts)
+                       RigidTransform(tuple(run.start), tuple(run.center)), fine.overlap(theta), restarts,
+                       dict(run.measures))
     if flags and params.check.on_failure == "error":
         raise StageError(f"registration failed: {reg.reason} (estimate {describe(transform)})")
     return reg

@@ -162,9 +162,9 @@ def test_levels_with_too_few_samples_are_measured_on_a_finer_grid_smoothed(blob_
 def test_dimension_defaults_apply_under_what_the_caller_set():
     two, three = for_dimension(RegisterParams(), 2), for_dimension(RegisterParams(), 3)
     assert [lv.spacing for lv in two.schedule] == [4.0, 2.0, 0.0] and three.schedule[-1].spacing == 2.0
-    assert two.sampling.region == "all" and three.sampling.region == "foreground" and three.start.steps == 2
-    given = for_dimension(RegisterParams.model_validate({"sampling": {"margin": 3.0}, "check": {"retry": False}}), 3)
-    assert given.sampling.region == "foreground" and given.sampling.margin == 3.0  # the caller's value wins
+    assert two.start.steps == 0 and three.start.steps == 2 and three.check.chance == 3.0 and two.check.chance == 0
+    given = for_dimension(RegisterParams.model_validate({"bounds": {"max_angle": 30.0}, "check": {"retry": False}}), 3)
+    assert given.bounds.max_angle == 30.0  # the caller's value wins
     assert given.check.retry is False and given.check.chance == DIMENSION_DEFAULTS[3]["check"]["chance"]
     custom = for_dimension(RegisterParams(schedule=[{"spacing": 1.0}]), 3)
     assert [lv.spacing for lv in custom.schedule] == [1.0]
@@ -213,7 +213,7 @@ def test_sample_mask_grows_the_foreground_by_the_margin():
     data = np.zeros((30, 40))
     data[10:20, 15:25] = 100.0
     image = Image(data, spacing=(2.0, 2.0))
-    assert sample_mask(image, for_dimension(RegisterParams(), 2)) is None  # 2D default: every pixel
+    assert sample_mask(image, for_dimension(RegisterParams(sampling={"region": "all"}), 2)) is None
     grown = sample_mask(image, for_dimension(RegisterParams(sampling={"region": "foreground", "margin": 4.0}), 2))
     assert grown.sum() == (10 + 4) * (10 + 4)  # two pixels of 2 mm on every side
 

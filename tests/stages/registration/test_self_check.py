@@ -70,18 +70,15 @@ def test_directions_cover_every_axis_pair_once():
 
 
 @pytest.mark.parametrize("d", [2, 3])
-def test_flatness_of_a_quadratic_is_its_eigenvalue_ratio(d):
-    """On an exact quadratic ``-(u' A u)`` of the unit (arc, translation) vector u the flattest direction is A's
-    least eigenvector and the ratio its eigenvalue over the largest."""
+def test_flatness_of_a_quadratic_is_its_drop_ratio(d):
+    """On an exact quadratic ``-(u' A u)`` of the unit (arc, translation) vector u, with A diagonal, the drop along
+    an axis is its eigenvalue: the ratio is the smallest over the largest, the flattest direction its axis."""
     p, radius = (3, 6)[d - 2], 50.0
-    Q = np.linalg.qr(np.random.default_rng(3).normal(size=(p, p)))[0]
-    A = Q @ np.diag(np.linspace(0.1, 2.0, p)) @ Q.T
-    k = p - d
-    unit = np.r_[[radius] * k, [1.0] * d]  # radians -> arc
-    ratio, u = flatness(lambda t: -float((t * unit) @ A @ (t * unit)), np.zeros(p), dim=d, step=1.0, reach=3.0,
-                        radius=radius)
-    assert ratio == pytest.approx(0.05, abs=0.01)
-    assert abs(u @ Q[:, 0]) > 0.99
+    eigen = np.linspace(0.1, 2.0, p)[::-1]  # the last axis (a translation) is the flattest
+    unit = np.r_[[radius] * (p - d), [1.0] * d]  # radians -> arc
+    ratio, u = flatness(lambda t: -float(((t * unit) ** 2) @ eigen), np.zeros(p), dim=d, reach=3.0, radius=radius)
+    assert ratio == pytest.approx(0.1 / 2.0)
+    np.testing.assert_allclose(np.abs(u), np.eye(p)[-1])
 
 
 @pytest.mark.parametrize("factor", [5, 6])
