@@ -157,7 +157,7 @@ class CheckSpec(Params):
     min_prominence: float = Field(6.0, ge=0, allow_inf_nan=False,
                                   description="flag a result less than this many median absolute deviations above "
                                               "the coarse search's median")
-    min_flatness: float = Field(0.25, ge=0, le=1, allow_inf_nan=False,
+    min_flatness: float = Field(0.1, ge=0, le=1, allow_inf_nan=False,
                                 description="flag a result from which the measure, on a copy of the images scaled to "
                                             "their content, falls in its flattest direction less than this fraction "
                                             "of its fall in the steepest: a parameter the images do not determine")
@@ -165,7 +165,7 @@ class CheckSpec(Params):
                                                   "less than min_overlap")
     chance: float = Field(0.0, ge=0, description="flag a result whose measure is below this multiple of its chance "
                                                  "level (the same samples with the fixed intensities paired at random)")
-    consistency: float = Field(0.0, ge=0, le=1, allow_inf_nan=False,
+    consistency: float = Field(0.014, ge=0, le=1, allow_inf_nan=False,
                                description="flag a result at which a coarser level's measure is lower than at that "
                                            "level's own end by more than this fraction of it: a finer level walked "
                                            "away from the basin the coarser one found")
@@ -217,7 +217,7 @@ def _level(spacing, bins, iterations, step, c, interpolation, samples=None, **mo
 DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
     2: {
         # factors 4 and 2, then native pixels (the 2D accuracy sweep of docs/registration.md); 20,000 samples at the
-        # finest level (the validation corpus's tune split)
+        # finest level; the thresholds of the self-check: the validation corpus's tune split (docs/registration.md)
         "schedule": [_level(4.0, 16, 260, 4.0, 8.0, "parzen"), _level(2.0, 24, 40, 1.0, 2.0, "parzen"),
                      _level(0.0, 32, 30, 0.3, 0.5, "parzen", 20000, average=2, gain_alpha=1.0)],
     },
@@ -229,8 +229,8 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "start": {"steps": 2},
         "bounds": {"max_angle": 45.0},
         "coarse_overlap_power": 1.0,
-        "check": {"grid": 5, "min_content": 0.0, "min_prominence": 0.0, "overlap_bound": False, "chance": 3.0,
-                  "margin": 0.01, "candidates": 2, "refine": 30},
+        "check": {"grid": 5, "min_content": 0.0, "min_prominence": 0.0, "min_flatness": 0.0, "overlap_bound": False,
+                  "chance": 3.0, "consistency": 0.005, "margin": 0.01, "candidates": 2, "refine": 30},
     },
 }
 

@@ -194,7 +194,7 @@ class _Run:
         self.upper = np.r_[[a] * self.k, self.start[self.k:] + self.max_translation]
         self.history: list[dict[str, np.ndarray]] = []
         self.ends: list[np.ndarray] = []
-        self._grid: GridSearch | None = None
+        self._grid: dict[float, GridSearch] = {}
 
     def _pyramid(self) -> list[_Level]:
         """One measure per schedule level, coarse to fine (module docstring, point 2)."""
@@ -335,11 +335,12 @@ class _Run:
                                             min_overlap=self.params.metric.min_overlap, spacing=spacing))
         return getattr(self, key)
 
-    def grid(self) -> GridSearch:
-        """The coarse exhaustive search (once): 2D ``check.probes`` angles over the full circle, 3D no rotation and
-        ``check.angles`` about each axis; x a ``check.grid``^d square of translations over the search box about
-        the centroid-mapping translation of each rotation."""
-        if self._grid is None:
+    def grid(self, min_overlap: float | None = None) -> GridSearch:
+        """The coarse exhaustive search (once per ``min_overlap``, default the metric's): 2D ``check.probes`` angles
+        over the full circle, 3D no rotation and ``check.angles`` about each axis; x a ``check.grid``^d square of
+        translations over the search box about the centroid-mapping translation of each rotation."""
+        key = self.params.metric.min_overlap if min_overlap is None else min_overlap
+        if key not in self._grid:
             c = self.params.check
             if self.dim == 2:
                 rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
@@ -349,11 +350,11 @@ class _Run:
                 rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
                                                        for a in c.angles])
                 polish = [np.zeros(3)]
-            self._grid = grid_search(
+            self._grid[key] = grid_search(
                 self.search_images(), rotations,
                 lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
-                steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
-        return self._grid
+                steps=c.grid, half_width=self.max_translation, polish_rotations=polish, min_overlap=key)
+        return self._grid[key]
 
     def candidates(self, theta: np.ndarray) -> list[np.ndarray]:
         """The ``check.candidates`` best grid transforms away from the result, at least a grid cell apart."""
@@ -468,22 +469,26 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
-    """From the result, the first level's measure with half the ``min_overlap`` climbs elsewhere, higher and with
-    less overlap than ``min_overlap``: the images match best where they overlap less than accepted (a moving
-    image shifted out of view), and the result is the best transform on the bound, not the answer."""
+    """From the result, or from the best transform of a coarse search that accepts half the overlap, the first
+    level's measure with half the ``min_overlap`` climbs elsewhere, higher and with less overlap than
+    ``min_overlap``: the images match best where they overlap less than accepted (a moving image shifted out of
+    view), and the result is the best transform on the bound, not the answer."""
     if not run.params.check.overlap_bound:
         return []
     coarse, m = run.levels[0].objective, run.params.metric.min_overlap
     relaxed = coarse.with_min_overlap(0.5 * m)
     here = relaxed(theta)
-    end, there = run.refine(theta, relaxed)
-    overlap = coarse.overlap(end)
-    if overlap < m and math.isfinite(here) and there > here + run.params.check.margin * abs(here) \
-            and run.distance(end, theta) >= 2.0 * run.levels[0].spacing:
-        where = RigidTransform(tuple(end), tuple(run.center))
-        return [Flag("overlap_bound", f"the measure keeps rising where the images overlap less than min_overlap "
-                                      f"({m:.0%}): from the result it climbs to {describe(where)}, {overlap:.1%} "
-                                      f"overlap; the true alignment probably lies outside the accepted overlap")]
+    grid = run.grid(0.5 * m)  # the best transform of a coarse search that accepts the smaller overlap, if it needs it
+    starts = [theta] + [t for t in grid.thetas[np.argsort(-grid.values)[:1]] if coarse.overlap(t) < m]
+    for start in starts:
+        end, there = run.refine(start, relaxed)
+        overlap = coarse.overlap(end)
+        if overlap < m and math.isfinite(here) and there > here + run.params.check.margin * abs(here) \
+                and run.distance(end, theta) >= 2.0 * run.levels[0].spacing:
+            return [Flag("overlap_bound", f"the measure keeps rising where the images overlap less than min_overlap "
+                                          f"({m:.0%}): it climbs to {describe(RigidTransform(tuple(end), tuple(run.center)))}"
+                                          f", {overlap:.1%} overlap; the true alignment probably lies outside the "
+                                          f"accepted overlap")]
     return []
 
 

@@ -189,21 +189,23 @@ class GridSearch:
 
 
 def grid_search(images: SearchImages, rotations: np.ndarray, translation_at: Callable[[np.ndarray], np.ndarray], *,
-                steps: int, half_width: float, polish: int = 10, polish_rotations=((),)) -> GridSearch:
+                steps: int, half_width: float, polish: int = 10, polish_rotations=((),),
+                min_overlap: float | None = None) -> GridSearch:
     """Score every rotation (rows of ``rotations``, Euler angles) x a ``steps``^d translation grid of half-width
     about ``half_width`` (whole search pixels) about ``translation_at(angles)``; then polish the ``polish``
     best cells with a grid one search pixel apart about each (up to 2 pixels away), at each rotation offset of
     ``polish_rotations``
     (peaks of multimodal pairs are narrower than a cell).
 
-    The returned thetas and values are the coarse grid followed by the polished points.
+    The returned thetas and values are the coarse grid followed by the polished points (``-inf`` below
+    ``min_overlap``, default the images').
     """
     d = images.dim
     step = max(1, round(2.0 * half_width / max(1, steps - 1) / images.spacing))  # search pixels between cells
     k = np.rint((np.arange(steps) - (steps - 1) / 2.0) * step).astype(np.intp)
     thetas, values = [], []
     for angles in np.atleast_2d(rotations):
-        th, v = _score_cube(images, np.r_[angles, translation_at(angles)], k)
+        th, v = _score_cube(images, np.r_[angles, translation_at(angles)], k, min_overlap)
         thetas.append(th)
         values.append(v)
     coarse_thetas, coarse_values = np.vstack(thetas), np.concatenate(values)
@@ -216,20 +218,21 @@ def grid_search(images: SearchImages, rotations: np.ndarray, translation_at: Cal
                 continue  # the coarse point itself
             centre = coarse_thetas[i].copy()
             centre[: len(offset)] += offset
-            th, v = _score_cube(images, centre, half)
+            th, v = _score_cube(images, centre, half, min_overlap)
             thetas.append(th)
             values.append(v)
     grid_spacing = float(np.min(np.linalg.norm(images.step_vectors(np.eye(d, dtype=np.intp)), axis=1))) * step
     return GridSearch(np.vstack(thetas), np.concatenate(values), grid_spacing, len(coarse_values))
 
 
-def _score_cube(images: SearchImages, centre: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _score_cube(images: SearchImages, centre: np.ndarray, k: np.ndarray,
+                min_overlap: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Score ``centre`` translated by every d-tuple of whole search-pixel steps ``k`` (s,): thetas (s^d, p), values."""
     d = images.dim
     steps = np.array(list(itertools.product(k, repeat=d)), dtype=np.intp).reshape(-1, d)
     thetas = np.repeat(centre[None, :], len(steps), axis=0)
     thetas[:, -d:] += images.step_vectors(steps)
-    return thetas, images.score_steps(centre, steps)
+    return thetas, images.score_steps(centre, steps, min_overlap=min_overlap)
 
 
 def directions(p: int) -> np.ndarray:
