@@ -129,21 +129,30 @@ ROOT = Path(__file__).resolve().parent.parent
 ITK_DIR = ROOT / "data" / "images" / "itk"
 
 SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
-    "tune": {3: [("mni", 40)], 2: [("mni-axial", 80)]},
-    "report": {3: [("mni", 30), ("kmeans", 15), ("anatomical", 15)],
+    "tune": {3: [("mni", 40), ("kmeans", 15), ("anatomical", 15)],
+             2: [("mni-axial", 80), ("mni-coronal", 20), ("itk", 20)]},
+    "dev": {3: [("mni", 30), ("kmeans", 15), ("anatomical", 15)],
+            2: [("mni-axial", 30), ("mni-coronal", 30), ("mni-sagittal", 30), ("itk", 30)]},
+    "report": {3: [("mni", 30), ("kmeans", 15), ("anatomical", 15), ("mni15", 15)],
                2: [("mni-axial", 30), ("mni-coronal", 30), ("mni-sagittal", 30), ("itk", 30)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
-KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette"),
-         "report": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated")}
+KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated"),
+         "dev": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated"),
+         "report": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
-         ("report", "mni", 3): 2103, ("report", "kmeans", 3): 2203, ("report", "anatomical", 3): 2303,
-         ("report", "mni-axial", 2): 2102, ("report", "mni-coronal", 2): 2402,
-         ("report", "mni-sagittal", 2): 2502, ("report", "itk", 2): 2602}
+         ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
+         ("tune", "itk", 2): 1602,
+         ("dev", "mni", 3): 2103, ("dev", "kmeans", 3): 2203, ("dev", "anatomical", 3): 2303,
+         ("dev", "mni-axial", 2): 2102, ("dev", "mni-coronal", 2): 2402,
+         ("dev", "mni-sagittal", 2): 2502, ("dev", "itk", 2): 2602,
+         ("report", "mni", 3): 3103, ("report", "kmeans", 3): 3203, ("report", "anatomical", 3): 3303,
+         ("report", "mni15", 3): 3703, ("report", "mni-axial", 2): 3102, ("report", "mni-coronal", 2): 3402,
+         ("report", "mni-sagittal", 2): 3502, ("report", "itk", 2): 3602}
 
-SPLIT_ORDER = {"tune": 0, "report": 1}
+SPLIT_ORDER = {"tune": 0, "dev": 1, "report": 2}
 SWAPPABLE = ("labels", "silhouette")
 TISSUES = ("csf", "gm", "wm")
 T2_VALUES = (1.0, 0.45, 0.30)
@@ -223,8 +232,8 @@ def _mni_file(name: str) -> Path:
 
 
 @lru_cache(maxsize=None)
-def mni_source(spacing: int) -> Fields:
-    """The MNI152 2009a T1 with its tissue fractions, at 1 or 2 mm (linear resampling), as floats."""
+def mni_source(spacing: float) -> Fields:
+    """The MNI152 2009a T1 with its tissue fractions, at 1, 1.5 or 2 mm (linear resampling), as floats."""
     import SimpleITK as sitk
 
     t1 = sitk.Cast(sitk.ReadImage(str(_mni_file("t1"))), sitk.sitkFloat32)
@@ -244,7 +253,7 @@ def mni_source(spacing: int) -> Fields:
     maps["mask"] = np.clip(maps["mask"], 0.0, 1.0)
     maps["csf"] = np.clip(maps["mask"] - maps["gm"] - maps["wm"], 0.0, 1.0)
     grid = Image(maps["t1"], ref.GetSpacing(), ref.GetOrigin(), np.array(ref.GetDirection()).reshape(3, 3),
-                 f"mni{spacing}mm", str(_mni_file("t1")))
+                 f"mni{spacing:g}mm", str(_mni_file("t1")))
     return Fields(grid, maps)
 
 
@@ -259,6 +268,8 @@ def volume_source(name: str) -> Fields | None:
     """A 3D source by name (None: not available here)."""
     if name == "mni":
         return mni_source(2)
+    if name == "mni15":
+        return mni_source(1.5)
     if name == "kmeans":
         return _plain_source(read_image(ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz"))
     if name == "anatomical":
@@ -516,9 +527,22 @@ def kind_saturated(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
     return deg.noise(np.minimum(t1, np.percentile(t1[_foreground(f)], spec.saturation_percentile)))
 
 
+def kind_inverted(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The T1 turned negative (its maximum minus it): a bright background, dark white matter."""
+    t1 = deg.bias(f.maps["t1"])
+    return deg.noise(float(t1.max()) - t1)
+
+
+def kind_gamma(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The T1 through a power law (gamma drawn in [0.3, 3] from the case's contrast jitter): monotonic, non-linear."""
+    t1 = deg.bias(f.maps["t1"])
+    gamma = 0.3 * 10.0 ** ((spec.contrast_jitter[0] - 0.9) / 0.2)  # 0.9 ... 1.1 -> 0.3 ... 3
+    return deg.noise(CONTRAST_SCALE * (np.clip(t1, 0.0, None) / max(float(t1.max()), 1e-12)) ** gamma)
+
+
 KIND_MAKERS: dict[str, Callable[[Fields, CaseSpec, Degrade], np.ndarray]] = {
     "t1": kind_t1, "t2": kind_t2, "pd": kind_pd, "labels": kind_labels, "silhouette": kind_silhouette,
-    "threshold": kind_threshold, "saturated": kind_saturated}
+    "threshold": kind_threshold, "saturated": kind_saturated, "inverted": kind_inverted, "gamma": kind_gamma}
 
 CUBIC_MAPS = ("t1", "pd")
 
@@ -528,7 +552,7 @@ def maps_needed(kind: str, f: Fields) -> set[str]:
     tissues = set(TISSUES) if f.has_fractions else {"t1"}
     needs = {"t1": {"t1"}, "t2": tissues, "pd": set(TISSUES) if f.has_fractions else {"pd" if "pd" in f.maps else "t1"},
              "labels": tissues | {"mask"}, "silhouette": {"mask"}, "threshold": {"t1", "mask"},
-             "saturated": {"t1", "mask"}}[kind]
+             "saturated": {"t1", "mask"}, "inverted": {"t1"}, "gamma": {"t1"}}[kind]
     return needs | {"t1"}  # the T1 is the grid's data
 
 
@@ -836,7 +860,7 @@ def print_summary(summary: dict) -> None:
 def selected_cases(args) -> list[CaseSpec]:
     """The cases of the chosen splits and dimensions, filtered by kind and source, ``--limit`` per split and dim."""
     out = []
-    for split in (["tune", "report"] if args.split == "all" else [args.split]):
+    for split in (["tune", "dev", "report"] if args.split == "all" else [args.split]):
         for dim in args.dims:
             cases = [c for c in plan_split(split, dim, args.cases_scale)
                      if (not args.kinds or c.kind in args.kinds) and (not args.sources or c.source in args.sources)]
@@ -905,7 +929,7 @@ def _versions() -> dict:
 
 def run(args) -> None:
     cases = selected_cases(args)
-    if anatomical_path() is None and args.dims.count(3) and args.split in ("report", "all"):
+    if anatomical_path() is None and args.dims.count(3):
         print("TOPOMATCH_DATA_ROOT not set (or anatomical.nii missing): the anatomical cases are left out", flush=True)
     runners = method_runners(args.methods, args.metrics)
     if not cases or not runners:
@@ -1066,7 +1090,7 @@ def montage(args, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--split", choices=["tune", "report", "all"], default="all")
+    ap.add_argument("--split", choices=["tune", "dev", "report", "all"], default="all")
     ap.add_argument("--dims", default="2,3", help="comma-separated: 2, 3 or both")
     ap.add_argument("--methods", default="ours,elastix,simpleitk")
     ap.add_argument("--metrics", default="jt,jr,mi,tmi", help="our metrics (one method ours-<metric> each)")

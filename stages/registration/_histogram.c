@@ -1,23 +1,16 @@
-/* One pass of the registration's joint histogram: rigid map, N-linear interpolation and binning per sample.
- *
- * The compiled path of topomatch.stages.registration.histogram.JointHistogram (its numpy method is the
- * reference and the fallback without this extension; a test checks they agree). Written by hand because no
- * library computes a binned joint histogram of a rigidly resampled image at sample points (ITK's Mattes metric
- * does, inside ITK's optimiser loop only); compiled ahead of time (not by numba at run time) so that a
- * registration pays no compiler start-up. 2D images arrive as 3D images of one slice (size[2] == 1, the third
- * row of A and b zero), so one kernel serves both dimensions.
+/* One pass of the registration's joint histogram: rigid map, N-linear interpolation and binning per sample (the
+ * compiled path of histogram.JointHistogram; its numpy method is the reference and the fallback, tested equal).
+ * By hand: no library bins a rigidly resampled image at sample points outside ITK's own optimiser loop; ahead of
+ * time: a registration pays no compiler start-up. A 2D image arrives as a 3D image of one slice.
  *
  * joint_histogram(A, b, P, mflat, mbins, (mi, mj, mk), fbk, bmax, mode, h0, h1[, threads]) -> n_inside
- *   A (3 x 3 float64, row-major), b (3 float64): moving continuous index u = A p + b of a sample at p;
- *   P (3 x n float64, row-major): the samples' physical positions about the rotation centre;
- *   mflat (mk*mj*mi float64): moving intensities in bin units, bin centres at integers (modes 0, 1);
- *   mbins (mk*mj*mi int64): moving bins (mode 2);
- *   fbk (n int64): each sample's fixed bin times the number of moving bins;
- *   mode 0: interpolated value, nearest bin; 1: split linearly between the two nearest bins (first-order
- *   B-spline Parzen window); 2: partial volume (each corner's weight to its own bin);
- *   h0, h1 (n_cells + 1 float64, zeroed by the caller): accumulators; the histogram is h0 + h1.
- *   threads: split the samples over this many POSIX threads (each accumulates privately; the sums are added).
- * Samples outside the moving grid (0 <= u <= size - 1 on every axis) are skipped; n_inside counts the others.
+ *   u = A p + b (A 3 x 3, b 3: float64) maps a sample at p (P: 3 x n float64, about the rotation centre) to a
+ *   moving continuous index; mflat: moving intensities in bin units (bin centres at integers); mbins: moving bins
+ *   (int64); fbk: each sample's fixed bin times the moving bin count (int64); mode 0: the interpolated value to its
+ *   nearest bin, 1: split between its two nearest bins (order-1 B-spline Parzen window), 2: partial volume (each
+ *   corner's weight to its own bin); h0, h1: zeroed accumulators (n_cells + 1), the histogram is h0 + h1; threads:
+ *   the samples split over POSIX threads, each accumulating privately. Samples outside the moving grid (0 <= u <=
+ *   size - 1 on every axis) are skipped; n_inside counts the others.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>

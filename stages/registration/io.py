@@ -113,38 +113,6 @@ def _checked(path: str | Path) -> Path:
     return path
 
 
-def read_sitk(path: str | Path):
-    """The SimpleITK image of a file or DICOM series folder, as stored (scalar; a trailing axis of one dropped)."""
-    import SimpleITK as sitk
-
-    path = _checked(path)
-    try:
-        with keep_locale():
-            if path.is_dir():
-                files = _dicom_files(path)
-                reader = sitk.ImageFileReader()
-                reader.SetFileName(files[0])
-                reader.ReadImageInformation()
-                _check_size(path, tuple(reader.GetSize()[:2]) + (len(files),))
-                image = sitk.ReadImage(files)
-            else:
-                reader = sitk.ImageFileReader()
-                reader.SetFileName(str(path))
-                reader.ReadImageInformation()
-                components = reader.GetNumberOfComponents()
-                _check_size(path, tuple(reader.GetSize()) + ((components,) if components > 1 else ()))
-                image = reader.Execute()
-    except RuntimeError as exc:
-        raise InputError(path, f"cannot read image ({_sitk_detail(exc)})") from None
-    size = image.GetSize()
-    if image.GetDimension() == 4:
-        if size[3] != 1:
-            raise InputError(path, f"is a 4D image ({' x '.join(map(str, size))}: {size[3]} volumes, e.g. a time "
-                                   f"series); extract one 3D volume first (e.g. sitk.Extract or fslroi)")
-        image = sitk.Extract(image, list(size[:3]) + [0], [0, 0, 0, 0])
-    return image
-
-
 def _read_pillow(path: Path) -> np.ndarray:
     from PIL import Image as PILImage
     from PIL import UnidentifiedImageError
@@ -192,10 +160,27 @@ def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...], tuple[f
 
 
 def _read_with_sitk(path: Path):
-    """Pixels (SimpleITK's array order; colour as luminance), spacing, origin, direction of a file SimpleITK reads."""
+    """Pixels (SimpleITK's array order; colour as luminance), spacing, origin, direction of a file or DICOM series
+    folder SimpleITK reads (a trailing axis of one dropped)."""
     import SimpleITK as sitk
 
-    image = read_sitk(path)
+    try:
+        with keep_locale():
+            reader = sitk.ImageFileReader()
+            files = _dicom_files(path) if path.is_dir() else [str(path)]
+            reader.SetFileName(files[0])
+            reader.ReadImageInformation()
+            components = reader.GetNumberOfComponents()
+            size = tuple(reader.GetSize()[:2]) + (len(files),) if path.is_dir() else tuple(reader.GetSize())
+            _check_size(path, size + ((components,) if components > 1 else ()))
+            image = sitk.ReadImage(files) if path.is_dir() else reader.Execute()
+    except RuntimeError as exc:
+        raise InputError(path, f"cannot read image ({_sitk_detail(exc)})") from None
+    if image.GetDimension() == 4:
+        if image.GetSize()[3] != 1:
+            raise InputError(path, f"is a 4D image ({' x '.join(map(str, image.GetSize()))}: {image.GetSize()[3]} "
+                                   f"volumes, e.g. a time series); extract one 3D volume first (e.g. sitk.Extract)")
+        image = sitk.Extract(image, list(image.GetSize()[:3]) + [0], [0, 0, 0, 0])
     arr = sitk.GetArrayFromImage(image)
     components = image.GetNumberOfComponentsPerPixel()
     if components > 1:

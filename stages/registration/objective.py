@@ -48,10 +48,6 @@ class Objective:
         self.min_overlap, self.overlap_power = float(min_overlap), float(overlap_power)
         self.n_evals = 0
 
-    def with_min_overlap(self, min_overlap: float) -> "Objective":
-        """The same measure on the same histogram with another overlap bound."""
-        return self.on(self.histogram, min_overlap=min_overlap)
-
     def on(self, histogram, *, min_overlap: float | None = None) -> "Objective":
         """The same measure (and overlap settings, unless ``min_overlap`` is given) on another histogram."""
         return Objective(histogram, self.metric, alpha=self.alpha, weights=self.weights, tmi_form=self.tmi_form,

@@ -169,6 +169,9 @@ class CheckSpec(Params):
                                description="flag a result at which a coarser level's measure is lower than at that "
                                            "level's own end by more than this fraction of it: a finer level walked "
                                            "away from the basin the coarser one found")
+    stability: float = Field(0.0, ge=0, allow_inf_nan=False,
+                             description="flag a result from which the finest level, run again on another sample of "
+                                         "the images, ends farther than this (physical units; 0: off)")
     agreement: float = Field(1.0, ge=0, allow_inf_nan=False,
                              description="flag a result farther than this (physical units) from the optimum of the "
                                          "thesis's measure (JT, alpha 2, histogram weights) climbed from it at the "
@@ -224,9 +227,9 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
     3: {
         # 8, 4 and 2 mm (the 3D tune sets of docs/registration.md)
         "schedule": [_level(8.0, 16, 150, 4.0, 4.0, "parzen", 4000), _level(4.0, 24, 60, 1.0, 2.0, "parzen", 8000),
-                     _level(2.0, 64, 40, 0.3, 1.0, "parzen", 100000, average=2, gain_alpha=1.0, settle=0.2,
+                     _level(2.0, 64, 40, 0.3, 1.0, "parzen", 30000, average=2, gain_alpha=1.0, settle=0.2,
                             reruns=2)],
-        "start": {"steps": 2},
+        "start": {"steps": 2, "iterations": 40},
         "bounds": {"max_angle": 45.0},
         "coarse_overlap_power": 1.0,
         "check": {"grid": 5, "min_content": 0.0, "min_prominence": 0.0, "min_flatness": 0.0, "overlap_bound": False,

@@ -39,9 +39,9 @@ from topomatch.stages.registration.histogram import Binning, JointHistogram
 from topomatch.stages.registration.image import Image, foreground_mask, grow, rms_radius
 from topomatch.stages.registration.objective import Objective
 from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_dimension
-from topomatch.stages.registration.powell import PowellSettings, powell_maximize
+from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
-from topomatch.stages.registration.spsa import OptimizeResult, SPSASettings, spsa_maximize
+from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -170,6 +170,7 @@ class _Level:
     spec: LevelSpec
     objective: Objective
     spacing: float
+    images: tuple  # (fixed, moving, mask) on the level's grid: another sample of them for the stability test
 
 
 class _Run:
@@ -205,14 +206,12 @@ class _Run:
             F, M = (self.fixed.smoothed(sigma), self.moving.smoothed(sigma)) if sigma > 0 else (self.fixed, self.moving)
             F, M = F.shrink_to(grid.spacing, MIN_LEVEL_VOXELS), M.shrink_to(grid.spacing, MIN_LEVEL_VOXELS)
             mask = None if mask_image is None else mask_image.shrink_to(grid.spacing, MIN_LEVEL_VOXELS).data >= 0.5
-            jh = JointHistogram(F, M, Binning.of(self.fixed.data, spec.bins), Binning.of(self.moving.data, spec.bins),
-                                center=self.center, mode=spec.interpolation, samples=grid.samples,
-                                mask=mask if mask is not None and mask.any() else None, jitter=p.sampling.jitter,
-                                seed=p.seed + i)
+            mask = mask if mask is not None and mask.any() else None
             power = p.coarse_overlap_power if i < len(p.schedule) - 1 else 0.0
-            objective = Objective(jh, m.name, alpha=m.alpha, weights=m.weights, tmi_form=m.tmi_form,
-                                  min_overlap=m.min_overlap, overlap_power=power)
-            return _Level(spec, objective, float(np.mean(F.spacing)))
+            objective = Objective(self.histogram(spec, (F, M, mask), grid.samples, p.seed + i), m.name, alpha=m.alpha,
+                                  weights=m.weights, tmi_form=m.tmi_form, min_overlap=m.min_overlap,
+                                  overlap_power=power)
+            return _Level(spec, objective, float(np.mean(F.spacing)), (F, M, mask))
 
         levels = [build(i, spec, spec, 0.0) for i, spec in enumerate(p.schedule)]
         enough = next((i for i, lv in enumerate(levels) if lv.objective.histogram.n_samples >= MIN_LEVEL_SAMPLES),
@@ -220,6 +219,13 @@ class _Run:
         for i in range(enough):
             levels[i] = build(i, p.schedule[i], p.schedule[enough], SMALL_FOV_SIGMA * p.schedule[i].spacing)
         return levels
+
+    def histogram(self, spec: LevelSpec, images: tuple, samples: int | None, seed: int) -> JointHistogram:
+        """The joint histogram of a level's images (fixed, moving, mask), binned over the full images' ranges."""
+        F, M, mask = images
+        return JointHistogram(F, M, Binning.of(self.fixed.data, spec.bins), Binning.of(self.moving.data, spec.bins),
+                              center=self.center, mode=spec.interpolation, samples=samples, mask=mask,
+                              jitter=self.params.sampling.jitter, seed=seed)
 
     def start_search(self, t_init: np.ndarray) -> np.ndarray:
         """The start: ``transform.init``'s translation, or with ``start.steps`` the best of a grid of
@@ -468,6 +474,24 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
                               f"{limit:g}): this measure's optimum is biased on these images")]
 
 
+def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
+    """The result is not pinned down to ``check.stability``: the finest level run again from it on another sample
+    of the same images (another subset, another jitter) ends farther away (a broad or flat optimum: a silhouette
+    whose outline hardly constrains the rotation, an undetermined direction)."""
+    limit = run.params.check.stability
+    if limit <= 0:
+        return []
+    li, fine = len(run.levels) - 1, run.levels[-1]
+    other = fine.objective.on(run.histogram(fine.spec, fine.images, fine.spec.samples, run.params.seed + 7919))
+    end = run.optimize(li, fine.spec, theta, lower=run.lower, upper=run.upper, objective=other).theta
+    shift = run.measures["stability"] = run.distance(end, theta)
+    if shift <= limit:
+        return []
+    return [Flag("stability", f"the finest level run again from the result on another sample of the images ends "
+                              f"{shift:.2f} units away (stability {limit:g}): the images do not pin the transform "
+                              f"down to that precision")]
+
+
 def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
     """From the result, or from the best transform of a coarse search that accepts half the overlap, the first
     level's measure with half the ``min_overlap`` climbs elsewhere, higher and with less overlap than
@@ -476,7 +500,7 @@ def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
     if not run.params.check.overlap_bound:
         return []
     coarse, m = run.levels[0].objective, run.params.metric.min_overlap
-    relaxed = coarse.with_min_overlap(0.5 * m)
+    relaxed = coarse.on(coarse.histogram, min_overlap=0.5 * m)
     here = relaxed(theta)
     grid = run.grid(0.5 * m)  # the best transform of a coarse search that accepts the smaller overlap, if it needs it
     starts = [theta] + [t for t in grid.thetas[np.argsort(-grid.values)[:1]] if coarse.overlap(t) < m]
@@ -579,7 +603,8 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 CHECKS: tuple[Callable[..., list[Flag]], ...] = (check_start, check_overlap, check_bounds, check_chance, check_gain,
-                                                  check_consistency, check_agreement, check_overlap_bound,
+                                                  check_consistency, check_stability, check_agreement,
+                                                  check_overlap_bound,
                                                   check_content, check_prominence, check_flatness, check_capture)
 """The self-check, in order; after ``check_overlap`` flags an undefined measure nothing else is asked."""
 

@@ -21,6 +21,8 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import Params, ReportOutput, report
+from topomatch.stages.registration.evaluate import EvaluateResult
+from topomatch.stages.registration.landscape import LandscapeResult
 from topomatch.stages.registration.register import RegisterResult
 
 _NAME = dict(pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure or table")
@@ -40,9 +42,9 @@ def _label(r) -> str:
     return "|".join(parts)
 
 
-def _of_type(r, type_name: str) -> list[tuple[str, Any]]:
-    """(stage label, result) of every result of the given class name in an item, in chain order."""
-    return [(label, res) for label, res in r.results.items() if type(res).__name__ == type_name]
+def _of_type(r, cls: type) -> list:
+    """Every result of class ``cls`` in an item, in chain order."""
+    return [res for res in r.results.values() if isinstance(res, cls)]
 
 
 # --------------------------------------------------------------------------- Figs. 2.2-2.3
@@ -198,7 +200,7 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
     for r in results:
         if not r.ok:
             continue
-        for _, ev in _of_type(r, "EvaluateResult"):
+        for ev in _of_type(r, EvaluateResult):
             names = tuple(ev.truth)
             t = tuple(ev.truth[n] for n in names)
             est = tuple(ev.truth[n] + ev.errors[n] for n in names)
@@ -255,7 +257,7 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
     import matplotlib.pyplot as plt
 
     rows = [(r, res) for r in results if all(r.sweep.get(k) == v for k, v in params.where.items())
-            for _, res in _of_type(r, "LandscapeResult")]
+            for res in _of_type(r, LandscapeResult)]
     if not rows:
         return ReportOutput(notes=["no landscape results"])
     width = max(len(res.values) for _, res in rows)
@@ -417,8 +419,8 @@ def registration_table_report(experiment, results, params: RegistrationTablePara
     angles and ``d_rotation`` in degrees, the time in seconds."""
     rows = []
     for r in results:
-        evals = [res for _, res in _of_type(r, "EvaluateResult")]
-        regs = [res.registration for res in r.results.values() if isinstance(res, RegisterResult)]
+        evals = _of_type(r, EvaluateResult)
+        regs = [res.registration for res in _of_type(r, RegisterResult)]
         for k, reg in enumerate(regs):
             ev = next((e for e in evals if e.method == reg.method), None)
             t = reg.transform
@@ -474,7 +476,7 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
 
     evaluations, seen = [], set()
     for r in results:
-        for _, ev in _of_type(r, "EvaluateResult"):
+        for ev in _of_type(r, EvaluateResult):
             # a stage before a swept one (e.g. SimpleITK before register.metric.name) repeats per sweep point: count once
             key = (_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values()))
             if key not in seen:
