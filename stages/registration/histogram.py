@@ -1,28 +1,10 @@
 """Joint intensity histograms of a fixed image and a rigidly transformed moving image, 2D and 3D alike.
 
-The expensive part of every objective evaluation is the joint histogram of ``(fixed(p), moving(T(p)))``
-over fixed sample points p. :class:`JointHistogram` does all that does not depend on T once:
-
-- **samples**: pixels of the fixed image (all, or those of a mask, or a fixed-seed random subset), each
-  optionally moved by a fixed random offset within its pixel (``jitter``: the sample positions then do
-  not line up with either grid, which removes the grid-alignment ripples of interpolated measures);
-  their physical positions about the rotation centre, their fixed bins;
-- **moving image** in bin units (and binned, for partial volume), flattened.
-
-One evaluation of the parameters (:mod:`~topomatch.stages.registration.transform`, rotation first) is a
-d x d product to moving continuous indices, N-linear interpolation and binning per sample, in one
-compiled pass (``_histogram.c``; :meth:`JointHistogram.histogram_numpy` is the reference and the
-fallback). Three ways to bin (``mode``):
-
-- ``linear``: the interpolated intensity goes to its bin (a count of 1);
-- ``parzen``: the interpolated intensity is split linearly between its two nearest bins (first-order
-  B-spline Parzen window): the histogram is continuous in the parameters;
-- ``pv``: partial volume (Maes, Collignon et al. 1997): each of the 2^d neighbours adds its
-  interpolation weight to the bin of its own intensity; no new intensities.
-
-Samples whose ``T(p)`` falls outside the moving grid (``0 <= index <= size - 1`` on every axis) are
-left out and counted: the measure is computed on the overlap only, never on invented intensities.
-Binning: ``bins`` equal-width bins over each image's own intensity range (:class:`Binning`).
+:class:`JointHistogram` does once all that does not depend on the transform (the fixed samples: a mask, a
+fixed-seed subset, a jitter within their pixels; their physical positions about the rotation centre and their
+bins; the moving image in bin units); an evaluation is then one compiled pass (``_histogram.c``; numpy without
+it) of the rigid map, N-linear interpolation and binning (``linear``, ``parzen`` or partial volume ``pv``).
+Samples that leave the moving grid are left out and counted. See docs/registration.md, "The joint histogram".
 """
 
 from __future__ import annotations

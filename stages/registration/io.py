@@ -1,20 +1,10 @@
-"""Reading and writing the registration's images, 2D and 3D: PNG/TIFF/JPEG/BMP (Pillow); NIfTI, MetaImage,
-NRRD, DICOM files and DICOM series folders (SimpleITK, the adapter between ``SimpleITK.Image`` and
-:class:`~topomatch.stages.registration.image.Image`).
+"""Reading and writing the registration's images, 2D and 3D: PNG/TIFF/JPEG/BMP (Pillow); NIfTI (nibabel's voxels,
+SimpleITK's reading of the header); MetaImage, NRRD, DICOM files and series folders (SimpleITK).
 
-Every reader returns an :class:`Image` in SimpleITK's array order with ITK's geometry: spacing, origin and
-direction as SimpleITK reads them (LPS millimetres; a NIfTI's qform/sform converted by SimpleITK), so
-physical points, transforms and matrices agree with SimpleITK's, elastix's and ANTs' readings of the same
-files; a Pillow image has spacing 1, origin 0 (its dpi is a print resolution). A file of two axes of more
-than one pixel is a 2D image, of three a 3D volume; ``slice_index`` takes a 2D slice of a volume along an
-axis of its ``(k, j, i)`` array (the slice keeps the in-plane spacing, at origin 0 with the identity
-direction). Colour becomes its luminance ``0.299 R + 0.587 G + 0.114 B``.
-
-Every problem is an :class:`~topomatch.pipeline.errors.InputError` naming the file or folder: missing,
-unreadable or unsupported input, a folder with no DICOM series or several, a 4D (time series) or
-vector-valued image, more pixels than the size limit, NaN or infinite or constant pixels, fewer than 4
-pixels along an axis, a slice of a 2D image or out of range, and in :func:`load_pair` inputs of different
-dimensionality.
+Every reader returns an :class:`Image` in SimpleITK's array order with ITK's geometry as SimpleITK reads it
+(LPS mm), a Pillow image with spacing 1 and origin 0. Two axes of more than one pixel make a 2D image, three a
+volume; ``slice_index`` takes a 2D slice of a volume. Every problem is an
+:class:`~topomatch.pipeline.errors.InputError` naming the file (docs/registration.md, "Bad input").
 """
 
 from __future__ import annotations

@@ -1,23 +1,11 @@
-"""Parameters of :func:`~topomatch.stages.registration.register.register`, 2D and 3D alike, in the split that
-DIPY's ``AffineRegistration`` and SimpleITK's ``ImageRegistrationMethod`` use:
+"""Parameters of :func:`~topomatch.stages.registration.register.register`, 2D and 3D alike, grouped as DIPY's
+``AffineRegistration`` and SimpleITK's ``ImageRegistrationMethod`` group them: ``metric``, ``optimizer``,
+``schedule`` (a list of :class:`LevelSpec`), ``transform`` and ``start``, ``bounds``, ``sampling``, ``check``,
+``seed``. Angles in degrees, lengths in physical units (pixels for a PNG, mm for a volume); in a config
+``metric: mi`` is ``metric: {name: mi}``.
 
-- ``metric`` (:class:`MetricSpec`): which measure of the joint histogram, its order and weights;
-- ``optimizer`` (:class:`OptimizerSpec`): SPSA (the thesis's) or Powell, and SPSA's gains;
-- ``schedule`` (a list of :class:`LevelSpec`): the coarse-to-fine pyramid, per level its spacing, bins,
-  binning, sample cap, iterations and step lengths;
-- ``transform`` (:class:`TransformSpec`) and ``start`` (:class:`StartSpec`): where the transform starts;
-- ``bounds`` (:class:`BoundsSpec`): the search box around the start;
-- ``sampling`` (:class:`SamplingSpec`): which fixed pixels the histograms sample;
-- ``check`` (:class:`CheckSpec`): the self-check that flags a result it cannot trust;
-- ``seed``: SPSA's perturbations and the sample subsets.
-
-Angles in degrees, lengths in the images' physical units (pixels for a PNG, mm for a volume). In a config
-a group may be given by its name alone: ``metric: mi`` is ``metric: {name: mi}``.
-
-**The dimension enters here, once.** The defaults that differ between 2D images and 3D volumes (the
-schedule, the start search, the sampling region, which self-checks run) are in :data:`DIMENSION_DEFAULTS`;
-:func:`for_dimension` applies them under whatever the caller set, so a value given in a config, on the
-command line or to the API always wins.
+**The dimension enters here, once**: :data:`DIMENSION_DEFAULTS` holds what differs between 2D and 3D, applied
+by :func:`for_dimension` under whatever the caller set (a value from a config, the command line or the API wins).
 """
 
 from __future__ import annotations
@@ -233,7 +221,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "bounds": {"max_angle": 45.0},
         "coarse_overlap_power": 1.0,
         "check": {"grid": 5, "min_content": 0.0, "min_prominence": 0.0, "min_flatness": 0.0, "overlap_bound": False,
-                  "chance": 3.0, "consistency": 0.005, "margin": 0.01, "candidates": 2, "refine": 30},
+                  "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30},
     },
 }
 

@@ -1,28 +1,12 @@
 """Coarse-to-fine rigid registration of 2D images and 3D volumes: any measure (JT, JR, MI, TMI), SPSA or Powell.
 
-:func:`register` finds the parameters of the rigid transform ``T(p) = R (p - c) + c + t``
-(:mod:`~topomatch.stages.registration.transform`: SimpleITK's Euler2D / Euler3D, rotation first, radians
-and physical units, c the fixed grid's centre) maximising a measure of chapter 2
-(:mod:`~topomatch.stages.registration.divergence`) of the joint histogram of ``fixed(p)`` and
-``moving(T(p))`` over fixed samples (:mod:`~topomatch.stages.registration.histogram`). One run loop for
-both dimensions; the dimension enters through the transform's parametrisation and the defaults of
-:func:`~topomatch.stages.registration.params.for_dimension`.
-
-1. **Start**: ``transform.init`` maps the fixed intensity centroid onto the moving one (``moments``) or the
-   grid centres (``geometry``), angles 0; with ``start.steps`` a grid of translations about both and the
-   identity is scored at the coarsest level and the best are optimised briefly there.
-2. **Pyramid in physical space**: each :class:`LevelSpec` block-averages both images to about ``spacing``
-   (per axis: anisotropic pixels become near-isotropic ones) and samples the fixed image
-   (``sampling``: all pixels, or the Otsu foreground grown by a margin; a random subset of ``samples``).
-   A level with fewer than :data:`MIN_LEVEL_SAMPLES` samples is measured on the grid of the first finer
-   level with enough, Gaussian-smoothed to its own resolution. Every level but the finest may weigh its
-   measure by the overlap (``coarse_overlap_power``). A level never ends worse than it started (ITK's
-   ``ReturnBestParametersAndValue``, for the end points); one with ``settle`` runs again while its last
-   iterations still moved the estimate.
-3. **Parameter scaling**: angles are optimised in units of ``1 / r`` radians, r the RMS radius of the
-   sampled region, so that one unit of any parameter moves the image by about one physical unit.
-4. **Self-check**: each test of :data:`CHECKS` returns typed :class:`Flag` s (``ok`` is no flag); the
-   capture test may find a better basin, and with ``check.retry`` that result is adopted and checked again.
+:func:`register` finds the parameters of ``T(p) = R (p - c) + c + t`` (:mod:`~topomatch.stages.registration.transform`)
+maximising a measure of chapter 2 of the joint histogram of ``fixed(p)`` and ``moving(T(p))``: a start (the
+intensity centroids; in 3D a search of translations), a pyramid of levels in physical units (each a
+:class:`~topomatch.stages.registration.objective.Objective` on its own :class:`JointHistogram`), SPSA or Powell
+per level with angles scaled by the RMS radius, and a self-check (:data:`CHECKS`, each test returning typed
+:class:`Flag` s). One run loop for both dimensions: the dimension enters through the transform's
+parametrisation and :func:`~topomatch.stages.registration.params.for_dimension`. See docs/registration.md.
 """
 
 from __future__ import annotations
@@ -195,7 +179,7 @@ class _Run:
         self.upper = np.r_[[a] * self.k, self.start[self.k:] + self.max_translation]
         self.history: list[dict[str, np.ndarray]] = []
         self.ends: list[np.ndarray] = []
-        self._grid: dict[float, GridSearch] = {}
+        self._grid: GridSearch | None = None
 
     def _pyramid(self) -> list[_Level]:
         """One measure per schedule level, coarse to fine (module docstring, point 2)."""
@@ -341,12 +325,11 @@ class _Run:
                                             min_overlap=self.params.metric.min_overlap, spacing=spacing))
         return getattr(self, key)
 
-    def grid(self, min_overlap: float | None = None) -> GridSearch:
-        """The coarse exhaustive search (once per ``min_overlap``, default the metric's): 2D ``check.probes`` angles
-        over the full circle, 3D no rotation and ``check.angles`` about each axis; x a ``check.grid``^d square of
-        translations over the search box about the centroid-mapping translation of each rotation."""
-        key = self.params.metric.min_overlap if min_overlap is None else min_overlap
-        if key not in self._grid:
+    def grid(self) -> GridSearch:
+        """The coarse exhaustive search (once): 2D ``check.probes`` angles over the full circle, 3D no rotation and
+        ``check.angles`` about each axis; x a ``check.grid``^d square of translations over the search box about
+        the centroid-mapping translation of each rotation."""
+        if self._grid is None:
             c = self.params.check
             if self.dim == 2:
                 rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
@@ -356,11 +339,11 @@ class _Run:
                 rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
                                                        for a in c.angles])
                 polish = [np.zeros(3)]
-            self._grid[key] = grid_search(
+            self._grid = grid_search(
                 self.search_images(), rotations,
                 lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
-                steps=c.grid, half_width=self.max_translation, polish_rotations=polish, min_overlap=key)
-        return self._grid[key]
+                steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
+        return self._grid
 
     def candidates(self, theta: np.ndarray) -> list[np.ndarray]:
         """The ``check.candidates`` best grid transforms away from the result, at least a grid cell apart."""
@@ -502,8 +485,8 @@ def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
     coarse, m = run.levels[0].objective, run.params.metric.min_overlap
     relaxed = coarse.on(coarse.histogram, min_overlap=0.5 * m)
     here = relaxed(theta)
-    grid = run.grid(0.5 * m)  # the best transform of a coarse search that accepts the smaller overlap, if it needs it
-    starts = [theta] + [t for t in grid.thetas[np.argsort(-grid.values)[:1]] if coarse.overlap(t) < m]
+    grid = run.grid()  # its best transform when the smaller overlap is accepted, if it needs it
+    starts = [theta] + [t for t in grid.thetas[np.argsort(-grid.values_at(0.5 * m))[:1]] if coarse.overlap(t) < m]
     for start in starts:
         end, there = run.refine(start, relaxed)
         overlap = coarse.overlap(end)

@@ -1,22 +1,10 @@
-"""Coarse exhaustive search: the measure on a grid of rigid transforms, for the self-check (2D and 3D).
+"""Coarse exhaustive search for the self-check, 2D and 3D: the measure on a grid of rigid transforms.
 
-The optimisers are local; the self-check asks global questions of the result, answered on a small copy
-of both images (smaller side ~``SEARCH_SIDE`` pixels, ``SEARCH_BINS`` bins, nearest-neighbour sampling):
-
-* **capture**: which grid transforms (a set of rotations x a translation grid) away from the result
-  score best (the self-check refines them and compares them with the result);
-* **content overlap**: the fraction of the fixed image's content (Otsu foreground) that the result maps
-  onto the moving image's content;
-* **prominence**: how far the result stands out of the landscape, in median absolute deviations above
-  the grid's median (images with no shared content have no distinct optimum);
-* **flatness** (:func:`flatness`): whether the measure falls from the result in every direction of the
-  parameter space (a straight edge, stripes, the rotation of a disc do not determine every parameter).
-
-Scored with Jensen-Tsallis of order 2, histogram weights (the thesis's closed form
-``sum_ij h_ij^2 / (N h_i.) - sum_j (h_.j / N)^2``) whatever the registration's measure: a detector of
-basins, not the objective. All translations of one rotation are one ``np.bincount``: the moving bins sit
-on a padded canvas whose padding holds an "outside" bin, so a sample maps to a histogram cell by one
-gather, and translations a whole number of search pixels apart share one rounding of the rotated samples.
+On a small copy of both images (smaller side ~``SEARCH_SIDE`` pixels, ``SEARCH_BINS`` bins, nearest neighbour,
+at most ``SEARCH_SAMPLES`` samples), scored with Jensen-Tsallis of order 2 (histogram weights, the closed form)
+whatever the registration's measure: a detector of basins, not the objective. All translations of one rotation
+are one ``np.bincount`` (the moving bins on a padded canvas whose padding holds an "outside" bin). It answers the
+capture, content, prominence and flatness questions of the self-check (docs/registration.md).
 """
 
 from __future__ import annotations
@@ -130,7 +118,12 @@ class SearchImages:
     def score_steps(self, theta: np.ndarray, steps: np.ndarray, *, min_overlap: float | None = None) -> np.ndarray:
         """JT of order 2 at ``theta`` moved by each row of ``steps`` (b, d) whole search pixels: (b,);
         ``-inf`` where fewer than ``min_overlap`` (default: the instance's) of the samples are inside."""
+        values, inside = self.scores_and_overlaps(theta, steps)
         min_overlap = self.min_overlap if min_overlap is None else min_overlap
+        return np.where((inside >= min_overlap) & (inside > 0) & np.isfinite(values), values, -np.inf)
+
+    def scores_and_overlaps(self, theta: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """JT of order 2 (NaN without samples inside) and the fraction of the samples inside, (b,) each."""
         K, b = self.K, len(steps)
         cells = self._cells(np.asarray(theta, dtype=np.float64), np.asarray(steps, dtype=np.intp))
         idx = self._fbk[None, :] + self._bins_canvas[cells]
@@ -138,9 +131,7 @@ class SearchImages:
         idx += (K + 1) * np.arange(b)[:, None]
         h = np.bincount(idx.ravel(), minlength=(K + 1) * b).reshape(b, K + 1)[:, :K]
         h = h.reshape(b, -1, self._moving_bins).astype(np.float64)
-        inside = h.sum(axis=(1, 2))
-        values = batch_jensen_tsallis2(h)
-        return np.where((inside >= min_overlap * self.n_samples) & (inside > 0) & np.isfinite(values), values, -np.inf)
+        return batch_jensen_tsallis2(h), h.sum(axis=(1, 2)) / self.n_samples
 
     def score(self, theta: np.ndarray, *, min_overlap: float | None = None) -> float:
         """JT of order 2 of one transform (``-inf`` below ``min_overlap``, default: the instance's)."""
@@ -161,18 +152,31 @@ class GridSearch:
     ----------
     thetas : ndarray, shape (B, p)
         Parameters of every grid transform.
-    values : ndarray, shape (B,)
-        Their search scores (``-inf`` below the overlap).
+    raw, overlaps : ndarray, shape (B,)
+        Their search scores (NaN without a sample inside) and the fractions of the samples inside.
     spacing : float
         Translation step of the grid (physical units).
     n_coarse : int
         The first ``n_coarse`` rows are the regular grid, the rest polished points.
+    min_overlap : float
+        The overlap bound of :attr:`values`.
     """
 
     thetas: np.ndarray
-    values: np.ndarray
+    raw: np.ndarray
+    overlaps: np.ndarray
     spacing: float
     n_coarse: int
+    min_overlap: float
+
+    def values_at(self, min_overlap: float) -> np.ndarray:
+        """The scores, ``-inf`` where fewer than ``min_overlap`` of the samples are inside."""
+        ok = (self.overlaps >= min_overlap) & (self.overlaps > 0) & np.isfinite(self.raw)
+        return np.where(ok, self.raw, -np.inf)
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.values_at(self.min_overlap)
 
     def prominence(self, value: float) -> float:
         """``(value - median) / MAD`` over the finite scores of the regular grid (inf when it is flat, -inf if
@@ -189,50 +193,41 @@ class GridSearch:
 
 
 def grid_search(images: SearchImages, rotations: np.ndarray, translation_at: Callable[[np.ndarray], np.ndarray], *,
-                steps: int, half_width: float, polish: int = 10, polish_rotations=((),),
-                min_overlap: float | None = None) -> GridSearch:
+                steps: int, half_width: float, polish: int = 10, polish_rotations=((),)) -> GridSearch:
     """Score every rotation (rows of ``rotations``, Euler angles) x a ``steps``^d translation grid of half-width
     about ``half_width`` (whole search pixels) about ``translation_at(angles)``; then polish the ``polish``
-    best cells with a grid one search pixel apart about each (up to 2 pixels away), at each rotation offset of
-    ``polish_rotations``
-    (peaks of multimodal pairs are narrower than a cell).
-
-    The returned thetas and values are the coarse grid followed by the polished points (``-inf`` below
-    ``min_overlap``, default the images').
-    """
+    best cells (at the images' overlap bound) with a grid one search pixel apart about each (up to 2 pixels
+    away), at each rotation offset of ``polish_rotations`` (peaks of multimodal pairs are narrower than a cell).
+    The rows are the coarse grid followed by the polished points."""
     d = images.dim
     step = max(1, round(2.0 * half_width / max(1, steps - 1) / images.spacing))  # search pixels between cells
     k = np.rint((np.arange(steps) - (steps - 1) / 2.0) * step).astype(np.intp)
-    thetas, values = [], []
-    for angles in np.atleast_2d(rotations):
-        th, v = _score_cube(images, np.r_[angles, translation_at(angles)], k, min_overlap)
-        thetas.append(th)
-        values.append(v)
-    coarse_thetas, coarse_values = np.vstack(thetas), np.concatenate(values)
+    parts = [_score_cube(images, np.r_[angles, translation_at(angles)], k) for angles in np.atleast_2d(rotations)]
+    n_coarse = sum(len(p[0]) for p in parts)
+    coarse = GridSearch(*(np.concatenate([p[i] for p in parts]) for i in range(3)), 0.0, n_coarse, images.min_overlap)
     half = np.arange(-min(step // 2, 2), min(step // 2, 2) + 1)  # at most 5 per axis: 125 translations in 3D
-    for i in np.argsort(-coarse_values, kind="stable")[:polish]:
-        if not math.isfinite(coarse_values[i]):
+    for i in np.argsort(-coarse.values, kind="stable")[:polish]:
+        if not math.isfinite(coarse.values[i]):
             break
         for offset in polish_rotations:
             if step == 1 and not np.any(offset):
                 continue  # the coarse point itself
-            centre = coarse_thetas[i].copy()
+            centre = coarse.thetas[i].copy()
             centre[: len(offset)] += offset
-            th, v = _score_cube(images, centre, half, min_overlap)
-            thetas.append(th)
-            values.append(v)
-    grid_spacing = float(np.min(np.linalg.norm(images.step_vectors(np.eye(d, dtype=np.intp)), axis=1))) * step
-    return GridSearch(np.vstack(thetas), np.concatenate(values), grid_spacing, len(coarse_values))
+            parts.append(_score_cube(images, centre, half))
+    spacing = float(np.min(np.linalg.norm(images.step_vectors(np.eye(d, dtype=np.intp)), axis=1))) * step
+    return GridSearch(*(np.concatenate([p[i] for p in parts]) for i in range(3)), spacing, n_coarse,
+                      images.min_overlap)
 
 
-def _score_cube(images: SearchImages, centre: np.ndarray, k: np.ndarray,
-                min_overlap: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """Score ``centre`` translated by every d-tuple of whole search-pixel steps ``k`` (s,): thetas (s^d, p), values."""
+def _score_cube(images: SearchImages, centre: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``centre`` translated by every d-tuple of whole search-pixel steps ``k`` (s,): thetas (s^d, p), raw scores
+    and overlaps (s^d,)."""
     d = images.dim
     steps = np.array(list(itertools.product(k, repeat=d)), dtype=np.intp).reshape(-1, d)
     thetas = np.repeat(centre[None, :], len(steps), axis=0)
     thetas[:, -d:] += images.step_vectors(steps)
-    return thetas, images.score_steps(centre, steps, min_overlap=min_overlap)
+    return (thetas, *images.scores_and_overlaps(centre, steps))
 
 
 def directions(p: int) -> np.ndarray:

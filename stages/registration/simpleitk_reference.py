@@ -1,23 +1,12 @@
-"""The reference: SimpleITK's Mattes mutual-information rigid registration, on the same images.
+"""The reference: SimpleITK's Mattes mutual-information rigid registration of the same images, 2D or 3D.
 
-The images keep their geometry (:func:`~topomatch.stages.registration.io.to_sitk`; a PNG has origin 0 and
-spacing 1), so parameters compare directly with ours, 2D and 3D. The registration is the textbook SimpleITK set-up (the SimpleITK notebooks'
-"registration initialization" recipe):
-
-- ``Euler2DTransform`` / ``Euler3DTransform`` initialised by ``CenteredTransformInitializer`` (``GEOMETRY``:
-  centre of the fixed image, centres matched; or ``MOMENTS``: intensity centroids matched), so the rotation
-  centre is the fixed grid's centre, as in our convention;
-- Mattes mutual information with ``bins`` bins, random sampling of ``sampling`` of the fixed
-  pixels with a fixed seed (deterministic);
-- linear interpolation; scales from physical shift; an optimiser: conjugate gradient with line
-  search (``line_search``, the default: the most accurate on the ITK cases, ~0.6 s per case) or
-  regular-step gradient descent (``regular_step``: ~0.15 s, but it often stops short in angle);
-  plain gradient descent with a per-iteration learning-rate estimate oscillated by ~2 px here;
-- a ``shrink`` pyramid with Gaussian ``smoothing`` (sigmas in pixels).
-
-The result is a :class:`~topomatch.stages.registration.register.Registration` (method
-``simpleitk/mattes(...)``); SimpleITK reports no failure flag, so ``ok`` is False only when the result
-leaves less than ``min_overlap`` of the fixed image overlapping the moving one or SimpleITK raises.
+The textbook set-up (the SimpleITK notebooks' recipe): ``Euler2DTransform`` / ``Euler3DTransform`` centred by
+``CenteredTransformInitializer`` (``GEOMETRY`` or ``MOMENTS``), Mattes MI on a fixed-seed random sample,
+linear interpolation, physical-shift scales, a shrink/smoothing pyramid, and conjugate gradient with line search
+(2D default: the most accurate on the ITK cases), regular-step gradient descent (3D default) or gradient
+descent. The images keep their geometry (:func:`~topomatch.stages.registration.io.to_sitk`), so parameters
+compare directly with ours. SimpleITK reports no failure: a result is flagged only for too little overlap or an
+exception.
 """
 
 from __future__ import annotations

@@ -1,23 +1,11 @@
 """The rigid transform of 2D and 3D registration, in ITK's convention (SimpleITK's ``Euler2DTransform`` /
 ``Euler3DTransform``), on physical points.
 
-A physical point ``p`` of the fixed image maps to the moving image by::
-
-    T(p) = R (p - c) + c + t
-
-with ``c`` the centre (the fixed grid's physical centre), ``t`` the translation and ``R`` the rotation
-of the Euler angles: in 2D ``R(a) = [[cos a, -sin a], [sin a, cos a]]``; in 3D
-``R = Rz(az) @ Rx(ax) @ Ry(ay)`` (ITK's default, ``ComputeZYX`` off). Registration finds T with
-``fixed(p) ~ moving(T(p))``: the fixed-to-moving point map that SimpleITK and elastix return and that
-``sitk.Resample(moving, fixed, T)`` uses. The only difference between the dimensions is the
-parametrisation: ``parameters`` are SimpleITK's, rotation first, angles in radians (2D: ``(angle, tx,
-ty)``; 3D: ``(ax, ay, az, tx, ty, tz)``). :meth:`RigidTransform.matrix` is the homogeneous
-(d + 1) x (d + 1) matrix of T, which does not depend on the centre chosen to write it.
-
-For a PNG (spacing 1, origin 0) points are ``(col, row)`` pixels; the moving image then shows the fixed
-content moved by T: with rows pointing down on screen, a positive angle turns it clockwise. The thesis
-writes ``Phi(x) = R x + t`` with ``R = [[cos a, sin a], [-sin a, cos a]]``, ITK's ``R(-a)``: a thesis
-angle ``a`` about the same centre is the ITK angle ``-a`` with the same translation (:func:`from_thesis`).
+``T(p) = R (p - c) + c + t``, ``c`` the fixed grid's centre, ``fixed(p) ~ moving(T(p))``; ``parameters`` are
+SimpleITK's, rotation first, radians: 2D ``(angle, tx, ty)`` with ``R(a) = [[cos a, -sin a], [sin a, cos a]]``,
+3D ``(ax, ay, az, tx, ty, tz)`` with ``R = Rz(az) Rx(ax) Ry(ay)`` (``ComputeZYX`` off). The dimensions differ only
+in this parametrisation. The thesis's ``R = [[cos a, sin a], [-sin a, cos a]]`` is ITK's ``R(-a)``
+(:func:`from_thesis`). See docs/registration.md, "Conventions".
 """
 
 from __future__ import annotations
