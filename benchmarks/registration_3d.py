@@ -36,11 +36,15 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from registration_corpus import elastix_available  # noqa: E402
+from registration_corpus import run_elastix as corpus_elastix  # noqa: E402
 from topomatch.stages.registration.evaluate import tre_points
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.io import read_volume
@@ -76,44 +80,15 @@ def run_sitk(case: Case) -> Registration:
     return sitk_register(case.fixed, case.moving, SimpleITK3DParams())
 
 
-def elastix_available() -> bool:
-    try:
-        import itk  # noqa: F401
-
-        return hasattr(itk, "elastix_registration_method")
-    except ImportError:
-        return False
-
-
-def _to_itk(volume: Image):
-    import itk
-
-    image = itk.image_from_array(np.ascontiguousarray(volume.data, dtype=np.float32))
-    image.SetSpacing([float(s) for s in volume.spacing])
-    image.SetOrigin([float(o) for o in volume.origin])
-    image.SetDirection(itk.matrix_from_array(np.ascontiguousarray(volume.direction, dtype=np.float64)))
-    return image
-
-
 def run_elastix(case: Case) -> Registration:
-    """elastix's default rigid parameter map (EulerTransform, AdvancedMattesMI, ASGD, 4 resolutions)."""
-    import itk
-
-    t0 = time.perf_counter()
-    fixed, moving = _to_itk(case.fixed), _to_itk(case.moving)
-    po = itk.ParameterObject.New()
-    po.AddParameterMap(po.GetDefaultParameterMap("rigid"))
-    try:
-        _, tp = itk.elastix_registration_method(fixed, moving, parameter_object=po, log_to_console=False)
-    except RuntimeError as exc:
-        ident = RigidTransform.identity(tuple(case.fixed.center))
-        return Registration(ident, float("nan"), (Flag("elastix", f"elastix failed: {str(exc)[-200:]}"),),
-                            "elastix/rigid", time.perf_counter() - t0, 0, 0, "exception")
-    m = tp.GetParameterMap(0)
-    params = tuple(float(v) for v in m["TransformParameters"])
-    center = tuple(float(v) for v in m["CenterOfRotationPoint"])
-    transform = RigidTransform(params, center).with_center(case.fixed.center)
-    return Registration(transform, float("nan"), (), "elastix/rigid(default map)", time.perf_counter() - t0, 0, 0, "")
+    """elastix's default rigid parameter map (EulerTransform, AdvancedMattesMI, ASGD, 4 resolutions), run as the
+    validation corpus runs it (``registration_corpus.run_elastix``)."""
+    result = corpus_elastix(None, None, case.fixed, case.moving)
+    if result.transform is None:
+        return Registration(RigidTransform.identity(tuple(case.fixed.center)), float("nan"),
+                            (Flag("elastix", f"elastix failed: {result.error}"),), "elastix/rigid", result.seconds,
+                            0, 0, "exception")
+    return Registration(result.transform, float("nan"), (), "elastix/rigid(default map)", result.seconds, 0, 0, "")
 
 
 def summarise(rows: list[dict]) -> dict:

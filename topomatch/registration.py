@@ -23,7 +23,7 @@ import numpy as np
 from topomatch.pipeline.cli_options import Option
 from topomatch.pipeline.config import chain_with
 from topomatch.pipeline.errors import InputError, StageError
-from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text
+from topomatch.pipeline.files import atomic_write_bytes
 from topomatch.pipeline.item import run_stages
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.io import read_image as _read_image
