@@ -72,14 +72,22 @@ order, whatever its kind: it is the same case whatever the other cases are. Its 
 mix sources and kinds and ``--limit`` picks a mix); the cases of a split and dimension are listed round-robin
 over its sources.
 
-Splits (fixed here, before any result was seen; nothing is chosen on ``report``):
+Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its results were seen):
 
-- ``tune`` (for calibrating self-check thresholds): 3D ``mni`` (40 cases) and 2D ``mni-axial``
-  (80 cases), kinds ``t1``, ``t2``, ``pd``, ``labels``, ``silhouette``.
-- ``report`` (for reporting them, never for choosing): 3D ``mni`` with other seeds (30), ``kmeans`` (15),
-  ``anatomical`` (15); 2D ``mni-axial`` with other seeds (30), ``mni-coronal`` (30), ``mni-sagittal`` (30),
-  ``itk`` (30); kinds of ``tune`` plus ``threshold`` and ``saturated`` (kinds not tuned on).
-  ``--cases-scale`` scales every count.
+- ``tune`` (where the defaults and the self-check's thresholds were chosen): 3D ``mni`` (40), ``kmeans`` (15),
+  ``anatomical`` (15); 2D ``mni-axial`` (80), ``mni-coronal`` (20), ``itk`` (20); kinds ``t1`` ... ``saturated``.
+- ``dev``: the first report split. Its results were seen while the thresholds were being chosen, so it is
+  not held out any more; kept for comparison.
+- ``report``: fresh seeds, an unseen source (3D ``mni15``: the MNI maps at 1.5 mm) and two unseen kinds
+  (``inverted``: the T1's negative, a dark head on a bright background; ``gamma``: the T1 to a power drawn in
+  [0.3, 3]). Its results led to one change (the content of an image became the Otsu class off the grid's
+  border, for the inverted kind), so it too is seen now.
+- ``confirm``: written after that change, to check it on cases nobody has seen: fresh seeds, the unseen
+  kinds again next to ``t1``, ``t2``, ``labels``, ``silhouette``, and an unseen frame (``tight``: the MNI
+  sections cropped to 45-60 % per axis, so that the brain fills most of the grid's border, the case the
+  border rule could get wrong).
+
+``--cases-scale`` scales every count.
 
 Methods (all in one process, one case after the other, each with its library defaults and thread count):
 ``ours-<metric>`` = ``topomatch.register(fixed_path, moving_path, metric=m)`` (time: the call's wall time,
@@ -135,12 +143,15 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
             2: [("mni-axial", 30), ("mni-coronal", 30), ("mni-sagittal", 30), ("itk", 30)]},
     "report": {3: [("mni", 30), ("kmeans", 15), ("anatomical", 15), ("mni15", 15)],
                2: [("mni-axial", 30), ("mni-coronal", 30), ("mni-sagittal", 30), ("itk", 30)]},
+    "confirm": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6)],
+                2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 20)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
 KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated"),
          "dev": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated"),
-         "report": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
+         "report": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "confirm": ("t1", "t2", "labels", "silhouette", "inverted", "gamma")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
@@ -150,9 +161,12 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("dev", "mni-sagittal", 2): 2502, ("dev", "itk", 2): 2602,
          ("report", "mni", 3): 3103, ("report", "kmeans", 3): 3203, ("report", "anatomical", 3): 3303,
          ("report", "mni15", 3): 3703, ("report", "mni-axial", 2): 3102, ("report", "mni-coronal", 2): 3402,
-         ("report", "mni-sagittal", 2): 3502, ("report", "itk", 2): 3602}
+         ("report", "mni-sagittal", 2): 3502, ("report", "itk", 2): 3602,
+         ("confirm", "mni", 3): 4103, ("confirm", "mni15", 3): 4703, ("confirm", "kmeans", 3): 4203,
+         ("confirm", "mni-axial", 2): 4102, ("confirm", "mni-coronal", 2): 4402, ("confirm", "mni-sagittal", 2): 4502,
+         ("confirm", "itk", 2): 4602}
 
-SPLIT_ORDER = {"tune": 0, "dev": 1, "report": 2}
+SPLIT_ORDER = {"tune": 0, "dev": 1, "report": 2, "confirm": 3}
 SWAPPABLE = ("labels", "silhouette")
 TISSUES = ("csf", "gm", "wm")
 T2_VALUES = (1.0, 0.45, 0.30)
@@ -301,7 +315,7 @@ def mni_section(plane: str, section: dict) -> Fields:
     if plane != "axial":  # rows are k (inferior first): show the head up
         maps = {k: v[::-1] for k, v in maps.items()}
     frame = section["frame"]
-    if frame == "crop":
+    if frame in ("crop", "tight"):
         shape = maps["t1"].shape
         keep = [max(8, int(round(f * n))) for f, n in zip(section["crop_fractions"], shape)]
         start = [int(round(s * (n - k))) for s, n, k in zip(section["crop_starts"], shape, keep)]
@@ -388,13 +402,16 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
-    position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(["as-is", "crop", "pad"]))
+    frames = ["as-is", "crop", "pad"] + (["tight"] if split == "confirm" else [])
+    position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     crop_fractions, crop_starts = rng.uniform(0.7, 0.9, size=2), rng.uniform(size=2)
+    if frame == "tight":  # 45-60 % per axis: the brain fills most of the grid's border
+        crop_fractions = 0.45 + 0.75 * (crop_fractions - 0.7)
     pads = rng.integers(5, 41, size=4)
     section = None
     if source.startswith("mni-"):
         section = {"position": position, "spacing": spacing, "frame": frame}
-        if frame == "crop":
+        if frame in ("crop", "tight"):
             section.update(crop_fractions=[float(v) for v in crop_fractions],
                            crop_starts=[float(v) for v in crop_starts])
         elif frame == "pad":
@@ -860,7 +877,7 @@ def print_summary(summary: dict) -> None:
 def selected_cases(args) -> list[CaseSpec]:
     """The cases of the chosen splits and dimensions, filtered by kind and source, ``--limit`` per split and dim."""
     out = []
-    for split in (["tune", "dev", "report"] if args.split == "all" else [args.split]):
+    for split in (list(SPLIT_ORDER) if args.split == "all" else [args.split]):
         for dim in args.dims:
             cases = [c for c in plan_split(split, dim, args.cases_scale)
                      if (not args.kinds or c.kind in args.kinds) and (not args.sources or c.source in args.sources)]
@@ -994,7 +1011,7 @@ def selftest(args) -> None:
     failures = 0
     folder = Path(tempfile.mkdtemp(prefix="corpus_selftest_"))
     try:
-        for split in ("tune", "report"):
+        for split in SPLIT_ORDER:
             for dim in (2, 3):
                 firsts = {}
                 for spec in plan_split(split, dim, 1.0):
@@ -1024,7 +1041,7 @@ def _selftest_case(spec: CaseSpec, folder: Path) -> int:
     c_near = max(_aligned_correlation(case, RigidTransform(truth.angles + tuple(truth.translation + step),
                                                            truth.center))
                  for step in np.vstack([np.eye(dim), -np.eye(dim)]) * max(fixed.spacing))
-    ok_geom = c_truth > 0.7 and c_truth > c_ident + 0.15 and c_truth > c_near
+    ok_geom = c_truth > 0.7 and c_truth > c_ident + 0.5 * (1.0 - c_ident) and c_truth > c_near  # half the loss undone
     print(f"{spec.id:28s} truth TRE {tre0:.1e}, offset {np.linalg.norm(offset):.4f} -> TRE {tre_off:.4f}; "
           f"corr(fixed, moving o T) T_true {c_truth:.3f}, one voxel off {c_near:.3f}, identity {c_ident:.3f}  "
           f"{'ok' if ok_tre and ok_geom else 'FAIL'}", flush=True)
@@ -1090,7 +1107,7 @@ def montage(args, path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--split", choices=["tune", "dev", "report", "all"], default="all")
+    ap.add_argument("--split", choices=[*SPLIT_ORDER, "all"], default="all")
     ap.add_argument("--dims", default="2,3", help="comma-separated: 2, 3 or both")
     ap.add_argument("--methods", default="ours,elastix,simpleitk")
     ap.add_argument("--metrics", default="jt,jr,mi,tmi", help="our metrics (one method ours-<metric> each)")

@@ -172,9 +172,19 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
     return float(edges[1:-1][np.argmax(between)])
 
 
+def border_fraction(mask: np.ndarray) -> float:
+    """The fraction of the array's outermost pixels (every face of the grid) that ``mask`` holds."""
+    inner = np.zeros(mask.shape, dtype=bool)
+    inner[tuple(slice(1, -1) if n > 2 else slice(0, 0) for n in mask.shape)] = True
+    return float(mask[~inner].mean())
+
+
 def foreground_mask(image: Image) -> np.ndarray:
-    """Pixels above Otsu's threshold (bool, the shape of ``image.data``): the head or brain of an MR image."""
-    return image.data > otsu_threshold(image.data)
+    """The image's content (bool, the shape of ``image.data``): of the two classes of Otsu's threshold, the one
+    that is not the majority on the grid's border. A bright head on a dark background gives the pixels above the
+    threshold; a dark object on a bright background (an inverted image, a negative, a radiograph) those below."""
+    above = image.data > otsu_threshold(image.data)
+    return ~above if border_fraction(above) > 0.5 else above
 
 
 def grow(mask: np.ndarray, distance: float, spacing) -> np.ndarray:

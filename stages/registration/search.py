@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from topomatch.stages.registration.histogram import Binning
-from topomatch.stages.registration.image import Image, otsu_threshold
+from topomatch.stages.registration.image import Image, foreground_mask
 from topomatch.stages.registration.transform import euler_matrix, n_angles
 
 SEARCH_SIDE = 24
@@ -80,10 +80,10 @@ class SearchImages:
         self._P = (fixed_small.points(flat) - self.center).T  # (d, n)
         self._fbk = fb.index(fixed_small.data.ravel()[flat]) * mb.bins
         self.n_samples = self._P.shape[1]
-        self._fixed_content = (fixed_small.data > otsu_threshold(fixed_small.data)).ravel()[flat]
+        self._fixed_content = foreground_mask(fixed_small).ravel()[flat]
         self._inv = np.linalg.inv(self.moving_small.index_matrix)
         self._moving_bins_small = mb.index(self.moving_small.data)
-        self._moving_content = self.moving_small.data > otsu_threshold(self.moving_small.data)
+        self._moving_content = foreground_mask(self.moving_small)
         self._pad = -1
 
     def step_vectors(self, steps: np.ndarray) -> np.ndarray:

@@ -92,6 +92,17 @@ def test_otsu_matches_simpleitk_and_splits_two_levels():
     assert foreground_mask(Image(values.reshape(60, 100))).sum() == 2000
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_content_is_the_otsu_class_off_the_border(d):
+    """A bright object on a dark background and its negative have the same content: the object."""
+    shape = (24, 30, 20)[:d]
+    grids = np.meshgrid(*[np.arange(n) - (n - 1) / 2 for n in shape], indexing="ij")
+    disc = sum(g ** 2 for g in grids) < 8.0 ** 2
+    data = np.where(disc, 100.0, 10.0)
+    assert np.array_equal(foreground_mask(Image(data)), disc)
+    assert np.array_equal(foreground_mask(Image(110.0 - data)), disc)
+
+
 def test_rms_radius_of_a_full_grid_is_closed_form():
     H, W = 41, 61
     assert rms_radius(Image(np.zeros((H, W)))) == pytest.approx(math.sqrt((W * W - 1) / 12 + (H * H - 1) / 12))

@@ -110,6 +110,16 @@ def test_every_anatomical_slice_registers_to_itself():
         assert reg.ok and _tre(image, reg, identity) < 0.1, (index, reg.transform, reg.reason)
 
 
+@pytest.mark.parametrize("theta", [(6.0, -4.0, 8.0), (-9.0, 5.0, -15.0)])
+def test_an_inverted_moving_image_registers_ok(pd_slice, theta):
+    """A negative of the fixed image (dark head on a bright background) shares all its content: found and ok."""
+    moving = _moved(pd_slice, *theta)
+    moving = Image(moving.data.max() - moving.data, name="inverted")
+    reg = register(pd_slice, moving)
+    assert reg.ok, reg.reason
+    assert _tre(pd_slice, reg, RigidTransform.euler2d(*theta, pd_slice.center)) < 0.5
+
+
 @pytest.mark.parametrize("theta", [(150.0, 45.0, 0.0), (170.0, 51.0, 30.0)])
 def test_a_moving_image_shifted_out_of_view_is_flagged(pd_slice, theta):
     reg = register(pd_slice, _moved(pd_slice, *theta))
