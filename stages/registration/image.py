@@ -180,11 +180,17 @@ def border_fraction(mask: np.ndarray) -> float:
 
 
 def foreground_mask(image: Image) -> np.ndarray:
-    """The image's content (bool, the shape of ``image.data``): of the two classes of Otsu's threshold, the one
-    that is not the majority on the grid's border. A bright head on a dark background gives the pixels above the
-    threshold; a dark object on a bright background (an inverted image, a negative, a radiograph) those below."""
+    """The image's content (bool, the shape of ``image.data``), from Otsu's two classes and the grid's border.
+
+    The class above the threshold when at most half the border is above it (a bright head on a dark
+    background); the class below when at least 90 % of the border is above it (a dark object on a bright
+    background: an inverted image, a negative); the whole grid in between (the object fills the frame: no
+    background to tell it from)."""
     above = image.data > otsu_threshold(image.data)
-    return ~above if border_fraction(above) > 0.5 else above
+    share = border_fraction(above)
+    if share <= 0.5:
+        return above
+    return ~above if share >= 0.9 else np.ones_like(above)
 
 
 def grow(mask: np.ndarray, distance: float, spacing) -> np.ndarray:

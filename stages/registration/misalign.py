@@ -48,20 +48,30 @@ def moved(source: Image, transform: RigidTransform, *, order: int = 3, noise: fl
     return source.with_data(data, name=f"{source.name}_moved", source=f"{source.name} moved by ({values})")
 
 
-def t2_like(data: np.ndarray) -> np.ndarray:
-    """A T2-like contrast of a T1-weighted image: background stays dark, the darkest tissue (CSF) becomes the
-    brightest, the brightest (white matter) dark; piecewise linear over the foreground's quantiles."""
+T2_LEVELS = (0.0, 0.1, 0.9, 0.75, 0.45, 0.25, 0.35, 0.35)
+""":func:`tissue_contrast` levels of a T2-like image: CSF brightest, white matter dark."""
+
+
+def tissue_contrast(data: np.ndarray, levels) -> np.ndarray:
+    """Another contrast of a T1-weighted image, piecewise linear in its intensity: ``levels`` (8 values, times
+    the foreground's maximum) at the minimum, halfway to Otsu's threshold, the threshold, and the foreground's
+    25th, 50th, 75th and 99th percentiles and maximum (the background, then CSF ... white matter)."""
     d = np.asarray(data, dtype=np.float64)
     t = otsu_threshold(d)
     fg = d[d > t]
     if fg.size == 0:
         return d.copy()
     lo = float(d.min())
-    q = np.quantile(fg, [0.0, 0.25, 0.5, 0.75, 0.99])
-    xs = np.array([lo, lo + 0.5 * (t - lo), t, q[1], q[2], q[3], q[4], max(q[4], float(d.max())) + 1e-9])
-    ys = np.array([0.0, 0.1, 0.9, 0.75, 0.45, 0.25, 0.35, 0.35])
+    q = np.quantile(fg, [0.25, 0.5, 0.75, 0.99])
+    xs = np.array([lo, lo + 0.5 * (t - lo), t, q[0], q[1], q[2], q[3], max(q[3], float(d.max())) + 1e-9])
     xs = np.maximum.accumulate(xs + np.arange(len(xs)) * 1e-9)
-    return np.interp(d, xs, ys) * float(fg.max())
+    return np.interp(d, xs, np.asarray(levels, dtype=np.float64)) * float(fg.max())
+
+
+def t2_like(data: np.ndarray) -> np.ndarray:
+    """A T2-like contrast of a T1-weighted image: background stays dark, the darkest tissue (CSF) becomes the
+    brightest, the brightest (white matter) dark (:data:`T2_LEVELS`)."""
+    return tissue_contrast(data, T2_LEVELS)
 
 
 def crop_slab(image: Image, axis: int, fraction: float, start_fraction: float) -> Image:

@@ -142,6 +142,11 @@ class CheckSpec(Params):
     min_content: float = Field(0.2, ge=0, le=1, allow_inf_nan=False,
                                description="flag a result that maps less than this fraction of the fixed image's "
                                            "content (Otsu foreground) onto the moving image's content")
+    min_structure: float = Field(0.04, ge=0, allow_inf_nan=False,
+                                 description="flag a pair in which either image has less structure inside its "
+                                             "outline than this (interior over outline gradient, structure.py): a "
+                                             "mask or silhouette, whose outline alone fixes the transform only as "
+                                             "well as the two outlines correspond (0: off)")
     min_prominence: float = Field(6.0, ge=0, allow_inf_nan=False,
                                   description="flag a result less than this many median absolute deviations above "
                                               "the coarse search's median")

@@ -26,6 +26,7 @@ from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
+from topomatch.stages.registration.structure import interior_structure
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -511,6 +512,25 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
     return []
 
 
+def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
+    """Either image's only structure is its outline (a mask, a silhouette): the result rests on the outline alone."""
+    threshold = run.params.check.min_structure
+    if threshold <= 0:
+        return []
+    flags = []
+    for role, image in (("fixed", run.fixed), ("moving", run.moving)):
+        structure = interior_structure(image)  # NaN: no interior or no outline to compare (not flagged)
+        if math.isfinite(structure):
+            run.measures[f"structure_{role}"] = structure
+        if structure < threshold:
+            flags.append(Flag("outline", f"the {role} image has almost no structure inside its outline (interior "
+                                         f"gradient {structure:.3f} of the outline's; min_structure {threshold:g}): a "
+                                         f"mask or silhouette, which fixes the transform only as well as its outline "
+                                         f"matches the other image's, often not to a pixel; check the overlay, or set "
+                                         f"check.min_structure 0 to accept such pairs"))
+    return flags
+
+
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
     """The result does not stand out of the coarse search's landscape."""
     if not run.params.check.search:
@@ -588,7 +608,7 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
 CHECKS: tuple[Callable[..., list[Flag]], ...] = (check_start, check_overlap, check_bounds, check_chance, check_gain,
                                                   check_consistency, check_stability, check_agreement,
                                                   check_overlap_bound,
-                                                  check_content, check_prominence, check_flatness, check_capture)
+                                                  check_content, check_outline, check_prominence, check_flatness, check_capture)
 """The self-check, in order; after ``check_overlap`` flags an undefined measure nothing else is asked."""
 
 

@@ -101,6 +101,11 @@ def test_content_is_the_otsu_class_off_the_border(d):
     data = np.where(disc, 100.0, 10.0)
     assert np.array_equal(foreground_mask(Image(data)), disc)
     assert np.array_equal(foreground_mask(Image(110.0 - data)), disc)
+    half = np.where(grids[0] < 0, 100.0, 10.0)  # half the border bright, half dark: the bright half
+    assert np.array_equal(foreground_mask(Image(half)), grids[0] < 0)
+    filled = np.where(disc, 10.0, 100.0)
+    filled[:3] = 10.0  # bright on 60-80 % of the border: no background, all is content
+    assert foreground_mask(Image(filled)).all()
 
 
 def test_rms_radius_of_a_full_grid_is_closed_form():
