@@ -7,14 +7,18 @@ import pytest
 from scipy import ndimage
 
 from topomatch.stages.registration.image import Image
-from topomatch.stages.registration.structure import fill_holes, interior_structure, smooth
+from topomatch.stages.registration.image import gaussian_blur
+from topomatch.stages.registration.structure import fill_holes, interior_structure
 
 
 @pytest.mark.parametrize("shape", [(40, 50), (20, 25, 30)])
-def test_smooth_and_fill_holes_equal_scipy(shape):
+def test_gaussian_blur_and_fill_holes_equal_scipy(shape):
     rng = np.random.default_rng(0)
     data = rng.normal(size=shape)
-    np.testing.assert_allclose(smooth(data), ndimage.gaussian_filter(data, 1.0, mode="nearest", truncate=3),
+    np.testing.assert_allclose(gaussian_blur(data, [1.0] * data.ndim, truncate=3.0),
+                               ndimage.gaussian_filter(data, 1.0, mode="nearest", truncate=3), atol=1e-12)
+    sigmas = [0.7, 0.0, 2.3][: data.ndim]
+    np.testing.assert_allclose(gaussian_blur(data, sigmas), ndimage.gaussian_filter(data, sigmas, mode="nearest"),
                                atol=1e-12)
     mask = ndimage.binary_dilation(rng.uniform(size=shape) < 0.05, iterations=2)
     assert np.array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask, structure=np.ones((3,) * len(shape))))
