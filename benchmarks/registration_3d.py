@@ -5,10 +5,10 @@ Usage::
     TOPOMATCH_DATA_ROOT=/work/shared/data python benchmarks/registration_3d.py [--set tune|report|all] \\
         [--cases 30] [--methods ours,simpleitk,elastix] [--json benchmarks/results/registration_3d.json]
 
-Cases (:func:`topomatch.stages.registration.misalign3d.make_case`): the source volume is the fixed
+Cases (:func:`topomatch.stages.registration.misalign.make_case`): the source volume is the fixed
 volume (with noise); the moving volume is it moved by a random rigid T (each Euler angle uniform in
 +-15 degrees, each translation in +-15 mm), cases 0-14 mono-modal (T1 -> T1), 15-29 multi-modal
-(T1 -> a T2-like contrast: :func:`~topomatch.stages.registration.misalign3d.t2_like`), every third moving
+(T1 -> a T2-like contrast: :func:`~topomatch.stages.registration.misalign.t2_like`), every third moving
 volume cropped to a 70 % slab along a random axis, Gaussian noise of 3 % of the intensity range on
 both. Sets:
 
@@ -22,9 +22,9 @@ both. Sets:
   was tuned on) with seed 3.
 
 Success: mean target registration error over the fixed foreground (Otsu) voxels <= 1 mm, from the
-true and estimated transforms. Methods: ours (the ``register_3d`` defaults), SimpleITK (Euler3D,
+true and estimated transforms. Methods: ours (the ``register`` defaults for volumes), SimpleITK (Euler3D,
 Mattes MI, regular-step gradient descent, 3 levels, 20 % sampling:
-:func:`~topomatch.stages.registration.simpleitk_reference.sitk_register_3d`), and elastix's default
+:func:`~topomatch.stages.registration.simpleitk_reference.sitk_register` with ``SimpleITK3DParams``), and elastix's default
 rigid parameter map through ``itk-elastix`` (the ``bench`` extra; skipped when not installed). All
 in one process, one case after the other, with each library's default thread count.
 """
@@ -36,17 +36,23 @@ import json
 import os
 import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from topomatch.stages.registration.misalign3d import Case3D, make_case, mean_tre
-from topomatch.stages.registration.register3d import Register3DParams, VolumeRegistration, register_volumes
-from topomatch.stages.registration.simpleitk_reference import SimpleITK3DParams, sitk_register_3d
-from topomatch.stages.registration.transform3d import RigidTransform3D
-from topomatch.stages.registration.volume import Volume
-from topomatch.stages.registration.volume_io import read_volume
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from registration_corpus import elastix_available  # noqa: E402
+from registration_corpus import run_elastix as corpus_elastix  # noqa: E402
+from topomatch.stages.registration.evaluate import tre_points
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.io import read_volume
+from topomatch.stages.registration.misalign import Case, make_case
+from topomatch.stages.registration.params import RegisterParams
+from topomatch.stages.registration.register import Flag, Registration, register
+from topomatch.stages.registration.simpleitk_reference import SimpleITK3DParams, sitk_register
+from topomatch.stages.registration.transform import RigidTransform, target_registration_error
 
 DATA = Path(os.environ.get("TOPOMATCH_DATA_ROOT", "/work/shared/data")) / "images"
 SOURCES = {
@@ -58,60 +64,31 @@ SETS = {"tune": [("kmeans", 1), ("skullstrip", 1)], "tune-anatomical": [("anatom
         "report": [("anatomical", 4), ("kmeans", 3), ("skullstrip", 3)]}
 
 
-def cases(source: Volume, n: int, seed: int) -> list[Case3D]:
+def cases(source: Image, n: int, seed: int) -> list[Case]:
     return [make_case(source, i, seed=seed, multimodal=i >= n // 2, crop=i % 3 == 2) for i in range(n)]
 
 
-def run_ours(case: Case3D, params: Register3DParams) -> VolumeRegistration:
-    return register_volumes(case.fixed, case.moving, params)
+def mean_tre(truth: RigidTransform, estimate: RigidTransform, fixed: Image) -> float:
+    return float(np.mean(target_registration_error(estimate, truth, tre_points(fixed))))
 
 
-def run_sitk(case: Case3D) -> VolumeRegistration:
-    return sitk_register_3d(case.fixed, case.moving, SimpleITK3DParams())
+def run_ours(case: Case, params: RegisterParams) -> Registration:
+    return register(case.fixed, case.moving, params)
 
 
-def elastix_available() -> bool:
-    try:
-        import itk  # noqa: F401
-
-        return hasattr(itk, "elastix_registration_method")
-    except ImportError:
-        return False
+def run_sitk(case: Case) -> Registration:
+    return sitk_register(case.fixed, case.moving, SimpleITK3DParams())
 
 
-def _to_itk(volume: Volume):
-    import itk
-
-    image = itk.image_from_array(np.ascontiguousarray(volume.data, dtype=np.float32))
-    image.SetSpacing([float(s) for s in volume.spacing])
-    image.SetOrigin([float(o) for o in volume.origin])
-    image.SetDirection(itk.matrix_from_array(np.ascontiguousarray(volume.direction, dtype=np.float64)))
-    return image
-
-
-def run_elastix(case: Case3D) -> VolumeRegistration:
-    """elastix's default rigid parameter map (EulerTransform, AdvancedMattesMI, ASGD, 4 resolutions)."""
-    import itk
-
-    t0 = time.perf_counter()
-    fixed, moving = _to_itk(case.fixed), _to_itk(case.moving)
-    po = itk.ParameterObject.New()
-    po.AddParameterMap(po.GetDefaultParameterMap("rigid"))
-    try:
-        _, tp = itk.elastix_registration_method(fixed, moving, parameter_object=po, log_to_console=False)
-    except RuntimeError as exc:
-        ident = RigidTransform3D(center=tuple(case.fixed.center))
-        return VolumeRegistration(transform=ident, value=float("nan"), ok=False,
-                                  reason=f"elastix failed: {str(exc)[-200:]}", method="elastix/rigid",
-                                  seconds=time.perf_counter() - t0, iterations=0, evaluations=0, stop_reason="exception")
-    m = tp.GetParameterMap(0)
-    params = tuple(float(v) for v in m["TransformParameters"])
-    center = tuple(float(v) for v in m["CenterOfRotationPoint"])
-    transform = RigidTransform3D(params, center).with_center(case.fixed.center)
-    seconds = time.perf_counter() - t0
-    return VolumeRegistration(transform=transform, value=float("nan"), ok=True, reason="",
-                              method="elastix/rigid(default map)", seconds=seconds, iterations=0, evaluations=0,
-                              stop_reason="")
+def run_elastix(case: Case) -> Registration:
+    """elastix's default rigid parameter map (EulerTransform, AdvancedMattesMI, ASGD, 4 resolutions), run as the
+    validation corpus runs it (``registration_corpus.run_elastix``)."""
+    result = corpus_elastix(None, None, case.fixed, case.moving)
+    if result.transform is None:
+        return Registration(RigidTransform.identity(tuple(case.fixed.center)), float("nan"),
+                            (Flag("elastix", f"elastix failed: {result.error}"),), "elastix/rigid", result.seconds,
+                            0, 0, "exception")
+    return Registration(result.transform, float("nan"), (), "elastix/rigid(default map)", result.seconds, 0, 0, "")
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -130,18 +107,18 @@ def main() -> None:
     ap.add_argument("--cases", type=int, default=30)
     ap.add_argument("--sources", default="kmeans,anatomical,skullstrip", help="only these source volumes of the sets")
     ap.add_argument("--methods", default="ours,simpleitk,elastix")
-    ap.add_argument("--params", default="{}", help="JSON overrides of the register_3d params (tuning only)")
+    ap.add_argument("--params", default="{}", help="JSON overrides of the register params (tuning only)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
     methods = args.methods.split(",")
     if "elastix" in methods and not elastix_available():
         print("itk-elastix is not installed (pip install 'topomatch[bench]'): elastix skipped")
         methods.remove("elastix")
-    params = Register3DParams.model_validate(json.loads(args.params))
+    params = RegisterParams.model_validate(json.loads(args.params))
     # each library's one-time start-up in a process is paid once, outside the timings: elastix loads ITK's modules
-    # (~20 s), ours loads its compiled histogram kernel (numba, ~0.5 s; docs/registration.md gives both)
+    # (~20 s); ours imports scipy's pieces on first use
     warm = read_volume(SOURCES["anatomical"])
-    warm_case = Case3D("warm-up", warm, warm, RigidTransform3D(center=tuple(warm.center)), False, False)
+    warm_case = Case("warm-up", warm, warm, RigidTransform.identity(tuple(warm.center)), False, False)
     for m, run in (("elastix", run_elastix), ("ours", lambda c: run_ours(c, params))):
         if m in methods:
             t0 = time.perf_counter()
@@ -182,7 +159,7 @@ def main() -> None:
         source = read_volume(SOURCES["kmeans"])
         case = cases(source, 3, 2)[2]
         a, b = run_ours(case, params), run_ours(case, params)
-        out["deterministic"] = a.transform.params == b.transform.params
+        out["deterministic"] = a.transform.parameters == b.transform.parameters
         print(f"deterministic (same seed twice, identical parameters): {out['deterministic']}")
     out["machine"]["load_average_at_end"] = list(os.getloadavg())
     if args.json:

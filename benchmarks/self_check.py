@@ -38,12 +38,10 @@ from pathlib import Path
 
 import numpy as np
 from topomatch.pipeline.paths import data_root
-from topomatch.stages.registration.interpolation import downsample
+from topomatch.stages.registration.evaluate import tre_points
+from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.misalign import moved
-from topomatch.stages.registration.transform import (
-    RigidTransform,
-    target_registration_error,
-)
+from topomatch.stages.registration.transform import RigidTransform, target_registration_error
 
 import topomatch
 
@@ -55,8 +53,9 @@ def verdict(fixed, outcome, truth) -> tuple[str, float]:
     if truth is None:
         tre = float("inf")
     else:
-        est = RigidTransform(outcome.tx, outcome.ty, outcome.angle, fixed.center)
-        tre = float(np.mean(target_registration_error(est, RigidTransform(*truth, fixed.center), fixed.shape)))
+        est = outcome.registration.transform
+        tre = float(np.mean(target_registration_error(est, RigidTransform.euler2d(*truth, fixed.center),
+                                                      tre_points(fixed))))
     correct = tre <= 1.0
     if correct:
         return ("ok" if outcome.ok else "false flag"), tre
@@ -69,12 +68,12 @@ def cases(rng: np.random.Generator):
     t1 = topomatch.read_image(ITK / "BrainT1Slice.png")
     for factor in (4, 5, 6):
         for source in (pd, t1):
-            small = source.with_data(downsample(source.data, factor), name=f"{source.name}/{factor}")
+            small = Image(source.shrink((factor, factor)).data, name=f"{source.name}/{factor}")  # in pixel units
             yield "small", f"{small.name} itself", small, small, (0.0, 0.0, 0.0)
             for _ in range(3):
                 theta = (rng.uniform(-4, 4), rng.uniform(-4, 4), rng.uniform(-15, 15))
                 yield ("small", f"{small.name} moved {np.round(theta, 1).tolist()}", small,
-                       moved(small, RigidTransform(*theta, small.center)), theta)
+                       moved(small, RigidTransform.euler2d(*theta, small.center)), theta)
     root = data_root()
     anatomical = root / "images/nibabel_testdata/anatomical.nii" if root else None
     if anatomical is not None and anatomical.exists():
@@ -88,7 +87,7 @@ def cases(rng: np.random.Generator):
         theta = (float(direction[0] * length), float(direction[1] * length), float(angle))
         for fixed in (pd, t1):
             yield ("shift", f"{fixed.name} <- PD {np.round(theta, 1).tolist()}", fixed,
-                   moved(pd, RigidTransform(*theta, pd.center)), theta)
+                   moved(pd, RigidTransform.euler2d(*theta, pd.center)), theta)
     H, W = pd.shape
     noise = pd.with_data(rng.normal(100.0, 40.0, size=pd.shape), name="noise")
     ramp = pd.with_data(np.add.outer(np.arange(H), np.arange(W)).astype(float), name="ramp")
@@ -112,17 +111,17 @@ def flat_cases(rng: np.random.Generator, like):
         across = (xx - W / 2) * n[0] + (yy - H / 2) * n[1]
         edge = like.with_data(200.0 * (across < rng.uniform(-20, 20)) + rng.normal(0, 3, (H, W)), name=f"edge{k}")
         theta = (rng.uniform(-8, 8), rng.uniform(-8, 8), 0.0)
-        yield "flat", f"edge {k}", edge, moved(edge, RigidTransform(*theta, edge.center)), None
+        yield "flat", f"edge {k}", edge, moved(edge, RigidTransform.euler2d(*theta, edge.center)), None
         r = rng.uniform(40, 80)
         disc = like.with_data(200.0 * ((xx - W / 2) ** 2 + (yy - H / 2) ** 2 < r * r) + rng.normal(0, 3, (H, W)),
                               name=f"disc{k}")
         theta = (rng.uniform(-8, 8), rng.uniform(-8, 8), rng.uniform(-20, 20))
-        yield "flat", f"disc {k}", disc, moved(disc, RigidTransform(*theta, disc.center)), None
+        yield "flat", f"disc {k}", disc, moved(disc, RigidTransform.euler2d(*theta, disc.center)), None
         period = rng.uniform(10, 30)
         stripes = like.with_data(200.0 * (np.sin(2 * np.pi * across / period) > 0) + rng.normal(0, 3, (H, W)),
                                  name=f"stripes{k}")
         theta = (rng.uniform(-3, 3), rng.uniform(-3, 3), 0.0)
-        yield "flat", f"stripes {k}", stripes, moved(stripes, RigidTransform(*theta, stripes.center)), None
+        yield "flat", f"stripes {k}", stripes, moved(stripes, RigidTransform.euler2d(*theta, stripes.center)), None
 
 
 def main() -> None:

@@ -82,6 +82,7 @@ def _single_threaded() -> None:
     threadpoolctl only limits the libraries already loaded, and scipy ships its own OpenBLAS
     (besides numpy's), loaded with ``scipy.linalg``: import it first.
     """
+    os.environ["OMP_NUM_THREADS"] = "1"  # read by the libraries that start threads of their own later
     try:
         import scipy.linalg  # noqa: F401  (loads scipy's OpenBLAS)
         import scipy.sparse.linalg  # noqa: F401

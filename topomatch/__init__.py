@@ -8,8 +8,8 @@ The Python API (the same operations, options and defaults as the command line)::
     topomatch.match("cat.obj", "dog.obj").dissimilarity
     topomatch.index(["meshes/"], "shapes.db")                   # the best method by default
     topomatch.open_index("shapes.db").query("cat.obj", k=5).results
-    reg = topomatch.register("fixed.png", "moving.png")         # reg.tx, reg.ty, reg.angle, reg.ok
-    reg = topomatch.register("fixed.nii.gz", "moving.nrrd")     # 3D: reg.parameters, reg.matrix, reg.ok
+    reg = topomatch.register("fixed.png", "moving.png")         # reg.parameters, reg.matrix, reg.ok (2D: reg.tx ...)
+    reg = topomatch.register("fixed.nii.gz", "moving.nrrd")     # the same for volumes (six parameters)
     topomatch.run_config("configs/demo.yaml").run_dir
 
 The names are loaded on first use, so ``import topomatch`` is cheap. The installed package joins

@@ -1,36 +1,13 @@
 """Entropies and the entropic similarity measures of thesis ch. 2, computed from a joint histogram.
 
-Notation: a joint histogram ``h`` of shape (n, k) counts pairs (reference bin i, target bin j);
-rows belong to the reference (fixed) image X, columns to the transformed target (moving) Y.
-The conditional distributions of the thesis are its normalised rows
-``p_i = h[i] / h[i].sum()`` (``p_ij = P(Y = y_j | X = x_i)``).
-
-Entropies of a distribution p (natural logarithms; ``0 log 0 = 0``, ``0 ** alpha = 0``):
-
-- Shannon ``H(p) = -sum p log p``;
-- Renyi ``R_a(p) = log(sum p^a) / (1 - a)``;
-- Tsallis ``H_a(p) = (sum p^a - 1) / (1 - a)``.
-
-Both generalised entropies are *exactly* Shannon's at ``a = 1`` here (within ``|a - 1| < 1e-9``
-the Shannon formula is used; elsewhere the formula is continuous in a).
-
-Measures (all are maximised at alignment):
-
-- Jensen-Tsallis ``JT = H_a(sum w_i p_i) - sum w_i H_a(p_i)``;
-- Jensen-Renyi ``JR = R_a(sum w_i p_i) - sum w_i R_a(p_i)`` (He, Ben Hamza, Krim 2003);
-- mutual information ``MI = H(X) + H(Y) - H(X, Y)``;
-- Tsallis mutual information, ``form='additive'`` (default; Martin et al. 2004):
-  ``S_a(X) + S_a(Y) + (1 - a) S_a(X) S_a(Y) - S_a(X, Y)``, zero for independent X, Y by the
-  pseudo-additivity of S_a; ``form='relative'``: the Tsallis relative entropy of the joint to
-  the product of the marginals, ``(sum p_xy^a (p_x p_y)^(1 - a) - 1) / (a - 1)``. Both tend to MI
-  as a -> 1.
-
-**Weights** ``w`` of the Jensen divergences: ``'histogram'`` (the thesis's choice) is the
-reference marginal ``w_i = h[i].sum() / h.sum()``, so the mixture ``sum w_i p_i`` is the target
-marginal; ``'uniform'`` is ``w_i = 1 / n'`` over the ``n'`` non-empty rows. **Empty rows**
-(reference bins without samples in the overlap) have no conditional distribution and are left
-out of both sums; with histogram weights they would get weight 0 anyway. Empty columns are
-zero probabilities and contribute nothing. With ``a = 1`` and histogram weights JT equals MI.
+Rows of ``h`` (n, k) belong to the reference (fixed) image X, columns to the moving Y; the conditional
+distributions are the normalised rows ``p_i``. Natural logarithms, ``0 log 0 = 0``, ``0 ** alpha = 0``; Tsallis
+``H_a(p) = (sum p^a - 1) / (1 - a)`` and Renyi ``R_a(p) = log(sum p^a) / (1 - a)`` are exactly Shannon's at a = 1.
+Measures (maximised at alignment): Jensen-Tsallis ``JT = H_a(sum w_i p_i) - sum w_i H_a(p_i)``, Jensen-Renyi (the
+same with R_a), mutual information, Tsallis MI (``form='additive'``: ``S(X) + S(Y) + (1 - a) S(X) S(Y) - S(X, Y)``,
+Martin et al. 2004; ``'relative'``: the Tsallis relative entropy of the joint to the product of the marginals).
+Weights: ``'histogram'`` (the thesis's: the fixed marginal) or ``'uniform'`` over the non-empty rows; empty rows
+are left out. See docs/registration.md, "Measures".
 """
 
 from __future__ import annotations

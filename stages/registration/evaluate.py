@@ -1,39 +1,43 @@
-"""Scoring a registration against a known transform: parameter errors and target registration error.
+"""Scoring a registration against a known transform, 2D and 3D: parameter errors and target registration error.
 
-The known transform (``truth``: a mapping with ``tx``, ``ty``, ``angle``; missing keys are 0) is
-read in the same ITK convention as the estimate, about the fixed image's centre
-``((W - 1) / 2, (H - 1) / 2)``.
+The known transform (``truth``: a mapping from the parameter names of
+:data:`~topomatch.stages.registration.transform.NAMES` to values, angles in degrees; missing names are 0;
+an optional ``center``) is read in the estimate's convention, about the fixed grid's centre unless it
+gives its own.
 
-The **target registration error** of a pixel x of the fixed grid is ``|T_est(x) - T_true(x)|``
-in pixels; ``tre_mean`` is its mean over every pixel of the fixed image and ``tre_max`` its
-maximum (at a corner). A registration succeeds when ``tre_mean <= threshold`` (1 px by default).
-Angle errors are wrapped to (-180, 180].
+The **target registration error** of a fixed point p is ``|T_est(p) - T_true(p)|`` (physical units);
+``tre_mean`` is its mean over the fixed grid's pixels (``region: all``, the 2D default) or over its Otsu
+foreground (``foreground``, the 3D default: the head, not the air around it), ``tre_max`` its maximum. A
+registration succeeds when ``tre_mean <= threshold``. Angle errors are wrapped to (-180, 180].
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
+import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import Params, StageError, StageResult, stage
-from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.image import Image, foreground_mask
 from topomatch.stages.registration.register import Registration
-from topomatch.stages.registration.transform import RigidTransform, target_registration_error
-
-TRUTH_KEYS = ("tx", "ty", "angle")
+from topomatch.stages.registration.transform import NAMES, RigidTransform, n_angles, target_registration_error
 
 
 class EvaluateParams(Params):
     """Parameters of :func:`evaluate`."""
 
-    threshold: float = Field(1.0, gt=0, allow_inf_nan=False, description="success: mean TRE at most this (pixels)")
+    threshold: float = Field(1.0, gt=0, allow_inf_nan=False, description="success: mean TRE at most this (physical "
+                                                                         "units: pixels for a PNG, mm for a volume)")
+    region: Literal["all", "foreground"] | None = Field(None, description="fixed points of the TRE: every pixel, or "
+                                                                          "the Otsu foreground (default: 2D all, 3D "
+                                                                          "foreground)")
 
 
 def truth_transform(truth: dict[str, Any] | None, fixed: Image) -> RigidTransform:
-    """The known transform as a :class:`RigidTransform` about the fixed image's centre.
+    """The known transform about the fixed grid's centre.
 
     Raises
     ------
@@ -43,15 +47,24 @@ def truth_transform(truth: dict[str, Any] | None, fixed: Image) -> RigidTransfor
     if not truth:
         raise StageError("evaluate needs a known transform: give pairs[].truth, pairs_csv.truth_columns, "
                          "or a misalign stage before it")
-    unknown = sorted(set(truth) - set(TRUTH_KEYS))
+    names = NAMES[fixed.dim]
+    unknown = sorted(set(truth) - set(names) - {"center"})
     if unknown:
-        raise StageError(f"truth has unknown keys {unknown}; expected {', '.join(TRUTH_KEYS)}")
+        raise StageError(f"truth has unknown keys {unknown}; expected {', '.join(names)} (and center)")
     try:
-        tx, ty, angle = (float(truth.get(k, 0.0)) for k in TRUTH_KEYS)
+        values = [float(truth.get(n, 0.0)) for n in names]
+        center = [float(c) for c in truth.get("center", fixed.center)]
     except (TypeError, ValueError) as exc:
         raise StageError(f"truth values must be numbers, got {truth} ({exc})") from None
-    H, W = fixed.shape
-    return RigidTransform(tx, ty, angle, ((W - 1) / 2.0, (H - 1) / 2.0)).with_center(fixed.center)
+    k = n_angles(fixed.dim)
+    return RigidTransform(tuple(math.radians(a) for a in values[:k]) + tuple(values[k:]), center).with_center(fixed.center)
+
+
+def tre_points(fixed: Image, region: str | None = None, max_points: int = 50000) -> np.ndarray:
+    """The fixed points (n, d) the TRE is averaged over (every ``ceil(count / max_points)``-th of the region)."""
+    region = region or ("all" if fixed.dim == 2 else "foreground")
+    flat = np.flatnonzero(foreground_mask(fixed).ravel()) if region == "foreground" else np.arange(fixed.data.size)
+    return fixed.points(flat[:: int(math.ceil(len(flat) / max_points))])
 
 
 @dataclass(frozen=True, eq=False)
@@ -61,23 +74,24 @@ class EvaluateResult(StageResult):
     Attributes
     ----------
     method : str
-        The registration's method label.
-    d_tx, d_ty, d_angle : float
-        Estimate minus truth (pixels, pixels, degrees).
+    errors : dict
+        Estimate minus truth per parameter name (angles in degrees, wrapped).
+    d_rotation : float
+        Angle of the rotation between estimate and truth (degrees).
+    d_translation : float
+        Length of the difference of the translations (about the fixed centre).
     tre_mean, tre_max : float
-        Target registration error over the fixed grid (pixels).
-    success : bool
-        ``tre_mean <= threshold``.
-    flagged : bool
-        The registration's own self-check failed (``not registration.ok``).
+    success, flagged : bool
+        ``tre_mean <= threshold``; the registration's own self-check failed.
     seconds : float
-        The registration's time.
+    truth : dict
+        The true parameters by name (angles in degrees).
     """
 
     method: str
-    d_tx: float
-    d_ty: float
-    d_angle: float
+    errors: dict[str, float]
+    d_rotation: float
+    d_translation: float
     tre_mean: float
     tre_max: float
     success: bool
@@ -86,9 +100,9 @@ class EvaluateResult(StageResult):
     truth: dict[str, float]
 
     def summary(self) -> dict:
-        return {"method": self.method, "d_tx": self.d_tx, "d_ty": self.d_ty, "d_angle": self.d_angle,
-                "tre_mean": self.tre_mean, "tre_max": self.tre_max, "success": self.success,
-                "flagged": self.flagged, "seconds": self.seconds}
+        return {"method": self.method, **{f"d_{k}": v for k, v in self.errors.items()}, "d_rotation": self.d_rotation,
+                "d_translation": self.d_translation, "tre_mean": self.tre_mean, "tre_max": self.tre_max,
+                "success": self.success, "flagged": self.flagged, "seconds": self.seconds}
 
 
 def evaluate_registration(fixed: Image, registration: Registration, truth: dict[str, Any] | None,
@@ -96,16 +110,27 @@ def evaluate_registration(fixed: Image, registration: Registration, truth: dict[
     """Compare ``registration`` with ``truth`` on the fixed image's grid."""
     true_t = truth_transform(truth, fixed)
     est = registration.transform.with_center(fixed.center)
-    tre = target_registration_error(est, true_t, fixed.shape)
-    d_angle = (est.angle - true_t.angle + 180.0) % 360.0 - 180.0
+    tre = target_registration_error(est, true_t, tre_points(fixed, params.region))
+    k = n_angles(fixed.dim)
+    d = np.asarray(est.parameters) - np.asarray(true_t.parameters)
+    d[:k] = np.degrees((d[:k] + math.pi) % (2 * math.pi) - math.pi)
+    cos = (np.trace(est.rotation @ true_t.rotation.T) - (fixed.dim - 2)) / 2.0
     mean = float(tre.mean())
-    return EvaluateResult(registration.method, est.tx - true_t.tx, est.ty - true_t.ty, d_angle, mean,
+    return EvaluateResult(registration.method, dict(zip(est.names, map(float, d))),
+                          math.degrees(math.acos(max(-1.0, min(1.0, cos)))), float(np.linalg.norm(d[k:])), mean,
                           float(tre.max()), bool(mean <= params.threshold) if math.isfinite(mean) else False,
                           not registration.ok, registration.seconds,
-                          {"tx": true_t.tx, "ty": true_t.ty, "angle": true_t.angle})
+                          dict(zip(true_t.names, (*true_t.angles_deg, *map(float, true_t.translation)))))
 
 
-@stage("evaluate", params=EvaluateParams, version=1, consumes=("fixed", "registration", "truth"))
+@stage("evaluate", params=EvaluateParams, version=2, consumes=("fixed", "registration", "truth"))
 def evaluate(fixed: Image, registration: Registration, truth, *, params: EvaluateParams) -> EvaluateResult:
-    """Errors in tx, ty, angle and mean/max target registration error against the known transform."""
+    """Errors per parameter, rotation and translation errors and mean/max target registration error against the
+    known transform."""
+    return evaluate_registration(fixed, registration, truth, params)
+
+
+@stage("evaluate_3d", params=EvaluateParams, version=2, consumes=("fixed", "registration", "truth"))
+def evaluate_3d(fixed: Image, registration: Registration, truth, *, params: EvaluateParams) -> EvaluateResult:
+    """The ``evaluate`` stage under its 3D name of the previous release (kept for a release)."""
     return evaluate_registration(fixed, registration, truth, params)

@@ -1,27 +1,45 @@
-"""Joint intensity histograms of a fixed image and a transformed moving image, fast.
+"""Joint intensity histograms of a fixed image and a rigidly transformed moving image, 2D and 3D alike.
 
-The expensive part of every objective evaluation is the joint histogram of
-``(fixed(x), moving(T(x)))`` over the fixed pixels x. :class:`JointHistogram` does all that
-does not depend on ``T`` once: the fixed pixels' bins (already multiplied by the number of
-moving bins), their positions relative to the rotation centre in moving-pixel units, and for
-partial-volume interpolation the binned moving image. One evaluation is then ~20 vectorised
-numpy operations on the sample arrays and one ``np.bincount`` on the combined index
-``fixed_bin * moving_bins + moving_bin`` (samples outside the moving image go to an extra
-cell that is dropped).
-
-Binning: ``bins`` equal-width bins over each image's own intensity range ``[min, max]``
-(the top value falls in the last bin), see :class:`Binning`.
+:class:`JointHistogram` does once all that does not depend on the transform (the fixed samples: a mask, a
+fixed-seed subset, a jitter within their pixels; their physical positions about the rotation centre and their
+bins; the moving image in bin units); an evaluation is then one compiled pass (``_histogram.c``; numpy without
+it) of the rigid map, N-linear interpolation and binning (``linear``, ``parzen`` or partial volume ``pv``).
+Samples that leave the moving grid are left out and counted. See docs/registration.md, "The joint histogram".
 """
 
 from __future__ import annotations
 
-import math
+import copy
+import os
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
-Interpolation = Literal["bilinear", "pv"]
+from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.interpolation import corners, inside, linear
+from topomatch.stages.registration.transform import euler_matrix, n_angles
+
+try:
+    from topomatch.stages.registration._histogram import joint_histogram as _compiled
+except ImportError:  # pragma: no cover - the extension is built on install; numpy keeps the answers without it
+    _compiled = None
+
+Mode = Literal["linear", "parzen", "pv"]
+MODES = {"linear": 0, "parzen": 1, "pv": 2}
+PARALLEL_SAMPLES = 20000
+"""Samples from which the compiled pass splits its work over :func:`histogram_threads` threads (below, a thread's
+start costs more than it saves)."""
+
+
+def histogram_threads() -> int:
+    """Threads of the compiled pass: ``$OMP_NUM_THREADS`` when set (the engine's worker processes set it to 1),
+    else the CPUs this process may use, at most 4."""
+    env = os.environ.get("OMP_NUM_THREADS", "")
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(4, cpus))
 
 
 @dataclass(frozen=True)
@@ -45,7 +63,7 @@ class Binning:
 
     @property
     def scale(self) -> float:
-        """``bins / (hi - lo)``: the bin of v is ``floor((v - lo) * scale)`` (``hi`` clipped to the last bin)."""
+        """``bins / (hi - lo)``."""
         return self.bins / (self.hi - self.lo)
 
     def index(self, values: np.ndarray) -> np.ndarray:
@@ -54,149 +72,121 @@ class Binning:
         return np.clip(idx, 0, self.bins - 1)
 
 
-def joint_histogram_reference(fixed_values: np.ndarray, moving_values: np.ndarray, fixed_binning: Binning,
-                              moving_binning: Binning, weights: np.ndarray | None = None) -> np.ndarray:
-    """Plain joint histogram of paired values (n,), shape (fixed bins, moving bins) (a reference for tests)."""
-    h = np.zeros((fixed_binning.bins, moving_binning.bins))
-    np.add.at(h, (fixed_binning.index(fixed_values), moving_binning.index(moving_values)),
-              1.0 if weights is None else weights)
-    return h
-
-
 class JointHistogram:
-    """Joint histograms of ``(fixed(x), moving(T(x)))`` for many transforms T at one resolution.
+    """Joint histograms of ``(fixed(p), moving(T(p)))`` for many rigid transforms T.
 
     Parameters
     ----------
-    fixed : ndarray, shape (Hf, Wf)
-        Fixed image at this resolution.
-    moving : ndarray, shape (Hm, Wm)
-        Moving image at this resolution.
+    fixed, moving : Image
+        The images at this resolution (any pyramid level; both in physical space).
     fixed_binning, moving_binning : Binning
         Usually over the full-resolution images' ranges.
-    factor : int
-        Pyramid factor f of both images: level pixel ``[r, c]`` is centred at full-resolution
-        ``(f c + (f - 1) / 2, f r + (f - 1) / 2)``; transforms are in full-resolution pixels.
-    center : (cx, cy)
-        Rotation centre in full-resolution (col, row) pixels.
-    interpolation : {'bilinear', 'pv'}
-        Bilinear intensity interpolation (binned afterwards) or partial-volume weights.
+    center : sequence of d floats
+        Rotation centre c of ``T(p) = R (p - c) + c + t``.
+    mode : {'linear', 'parzen', 'pv'}
     samples : int, optional
-        Use at most this many fixed pixels, a random subset drawn once with ``seed``.
-    seed : int
-        Seed of the subset.
+        At most this many fixed pixels (a random subset drawn once with ``seed``).
+    mask : ndarray of bool, optional
+        Fixed pixels (of this grid) that may be sampled.
+    jitter : bool
+        Move each sample by a fixed random offset within its pixel.
     """
 
-    def __init__(self, fixed: np.ndarray, moving: np.ndarray, fixed_binning: Binning, moving_binning: Binning, *,
-                 factor: int = 1, center: tuple[float, float], interpolation: Interpolation = "bilinear",
-                 samples: int | None = None, seed: int = 0):
-        fixed = np.asarray(fixed, dtype=np.float64)
-        self.moving = np.ascontiguousarray(moving, dtype=np.float64)
+    def __init__(self, fixed: Image, moving: Image, fixed_binning: Binning, moving_binning: Binning, *, center,
+                 mode: Mode = "parzen", samples: int | None = None, mask: np.ndarray | None = None,
+                 jitter: bool = False, seed: int = 0):
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        rng = np.random.default_rng(seed)
+        self.dim, self.mode = fixed.dim, mode
         self.fixed_binning, self.moving_binning = fixed_binning, moving_binning
-        self.interpolation = interpolation
-        self.factor = int(factor)
-        self.center = (float(center[0]), float(center[1]))
+        self.center = np.asarray(center, dtype=np.float64)
         self.shape = (fixed_binning.bins, moving_binning.bins)
         self.n_cells = fixed_binning.bins * moving_binning.bins
-        Hf, Wf = fixed.shape
-        rows, cols = np.mgrid[0:Hf, 0:Wf]
-        flat = np.arange(Hf * Wf)
-        if samples is not None and samples < Hf * Wf:
-            flat = np.sort(np.random.default_rng(seed).choice(Hf * Wf, size=int(samples), replace=False))
-        self.n_samples = len(flat)
-        f, o = self.factor, (self.factor - 1) / 2.0
-        X = f * cols.ravel()[flat] + o
-        Y = f * rows.ravel()[flat] + o
-        cx, cy = self.center
-        # positions relative to the centre, in moving-level pixels, as one (2, n) array: the
-        # transform of all samples is then a single 2 x 2 matrix product
-        self._P = np.ascontiguousarray(np.stack([(X - cx) / f, (Y - cy) / f]))
-        self._offset = o
-        fixed_bins = fixed_binning.index(fixed.ravel()[flat])
-        self.fixed_bins = fixed_bins
-        self._fbk = fixed_bins * moving_binning.bins  # combined-index base of each sample
-        Hm, Wm = self.moving.shape
-        self._Hm, self._Wm = Hm, Wm
-        self._hi = np.array([[Wm - 1.0], [Hm - 1.0]])
-        self._hi0 = np.array([[Wm - 2], [Hm - 2]])
-        self._mbins_last = moving_binning.bins - 1
-        m = np.zeros(Hm * Wm + Wm + 1)  # padded so that the neighbours of every pixel exist
-        m[: Hm * Wm] = (self.moving.ravel() - moving_binning.lo) * moving_binning.scale  # in bin units
-        if interpolation == "bilinear":
-            # bilinear value at pixel k + (fu, fv) = A + fu Dx + fv (Dy + fu Dxy), one table row per pixel,
-            # so that one gather fetches all four coefficients of every sample
-            k = np.arange(Hm * Wm)
-            A, R, D, DR = m[k], m[k + 1], m[k + Wm], m[k + Wm + 1]
-            self._table = np.ascontiguousarray(np.stack([A, R - A, D - A, DR - D - R + A]))
-        elif interpolation == "pv":
-            mb = np.zeros(Hm * Wm + Wm + 1, dtype=np.intp)
-            mb[: Hm * Wm] = moving_binning.index(self.moving).ravel()
-            k = np.arange(Hm * Wm)
-            self._table = np.ascontiguousarray(np.stack([mb[k], mb[k + 1], mb[k + Wm], mb[k + Wm + 1]]))
+        flat = np.flatnonzero(mask.ravel()) if mask is not None else np.arange(fixed.data.size)
+        if len(flat) == 0:
+            raise ValueError("the fixed mask selects no pixel")
+        if samples is not None and samples < len(flat):
+            flat = np.sort(rng.choice(flat, size=int(samples), replace=False))
+        idx = fixed.indices(flat).T  # (d, n)
+        if jitter:
+            idx += rng.uniform(-0.5, 0.5, size=idx.shape)
+            idx = np.clip(idx, 0.0, (np.asarray(fixed.size) - 1.0)[:, None])
+            values = linear(fixed.data, idx)[0]
         else:
-            raise ValueError(f"interpolation must be 'bilinear' or 'pv', got {interpolation!r}")
+            values = fixed.data.ravel()[flat]
+        self.n_samples = idx.shape[1]
+        P = np.zeros((3, self.n_samples))
+        P[: self.dim] = (fixed.physical(idx.T) - self.center).T
+        self._P = P  # (3, n): a 2D image is a 3D image of one slice for the compiled pass
+        self.fixed_bins = fixed_binning.index(values)
+        self._fbk = np.ascontiguousarray(self.fixed_bins * moving_binning.bins, dtype=np.int64)
+        self.moving = moving
+        self._inv = np.linalg.inv(moving.index_matrix)
+        self._size = tuple(moving.size) + (1,) * (3 - self.dim)
+        self._mflat = np.ascontiguousarray((moving.data.ravel() - moving_binning.lo) * moving_binning.scale - 0.5)
+        self._mbins = np.ascontiguousarray(moving_binning.index(moving.data).ravel(), dtype=np.int64)
+        self._bmax = moving_binning.bins - 1
+        self.threads = histogram_threads() if self.n_samples >= PARALLEL_SAMPLES else 1
 
-    def _positions(self, theta) -> np.ndarray:
-        tx, ty, angle = (float(t) for t in theta)
-        a = math.radians(angle)
-        c, s = math.cos(a), math.sin(a)
-        f, o = self.factor, self._offset
-        UV = np.array([[c, -s], [s, c]]) @ self._P
-        UV += np.array([[(self.center[0] + tx - o) / f], [(self.center[1] + ty - o) / f]])
-        return UV
+    def shuffled(self, seed: int = 0) -> "JointHistogram":
+        """The same samples with their fixed intensities paired with other samples' (a fixed-seed permutation):
+        the histograms of two images that share no structure, with these marginals and this sample count."""
+        other = copy.copy(self)
+        other._fbk = np.random.default_rng(seed).permutation(self._fbk)
+        return other
 
-    def positions(self, theta) -> tuple[np.ndarray, np.ndarray]:
-        """Moving-level positions (u, v) = (col, row) of the samples under ``theta = (tx, ty, angle)``."""
-        UV = self._positions(theta)
-        return UV[0], UV[1]
+    def index_map(self, theta) -> tuple[np.ndarray, np.ndarray]:
+        """``A`` (3, 3) and ``b`` (3,): moving continuous index ``A p + b`` of a sample at ``p`` (about c)
+        (rows and columns beyond the dimension are zero)."""
+        theta = np.asarray(theta, dtype=np.float64)
+        d, k = self.dim, n_angles(self.dim)
+        A, b = np.zeros((3, 3)), np.zeros(3)
+        A[:d, :d] = self._inv @ euler_matrix(theta[:k])
+        b[:d] = self._inv @ (self.center + theta[k:] - np.asarray(self.moving.origin))
+        return A, b
+
+    def positions(self, theta) -> np.ndarray:
+        """Continuous moving indices (d, n), ITK order, of the samples under ``theta``."""
+        A, b = self.index_map(theta)
+        return (A @ self._P + b[:, None])[: self.dim]
 
     def overlap(self, theta) -> float:
-        """Fraction of the samples whose ``T(x)`` lies inside the moving image."""
-        u, v = self.positions(theta)
-        return float(np.mean((u >= 0) & (u <= self._Wm - 1) & (v >= 0) & (v <= self._Hm - 1)))
+        """Fraction of the samples whose ``T(p)`` lies inside the moving grid."""
+        return float(np.mean(inside(self.positions(theta), self._size[: self.dim])))
 
     def __call__(self, theta) -> tuple[np.ndarray, int]:
-        """Joint histogram for ``theta = (tx, ty, angle)`` and the number of samples inside the moving image.
+        """Joint histogram (fixed bins, moving bins) for ``theta`` and the number of samples inside the moving grid."""
+        if _compiled is None:
+            return self.histogram_numpy(theta)
+        A, b = self.index_map(theta)
+        h0, h1 = np.zeros(self.n_cells + 1), np.zeros(self.n_cells + 1)
+        n_inside = _compiled(A, b, self._P, self._mflat, self._mbins, self._size, self._fbk, self._bmax,
+                             MODES[self.mode], h0, h1, self.threads)
+        return (h0[: self.n_cells] + h1[: self.n_cells]).reshape(self.shape), int(n_inside)
 
-        Returns
-        -------
-        h : ndarray, shape (fixed bins, moving bins), float64
-            Counts (bilinear) or summed partial-volume weights (pv); rows = fixed bins.
-        n_inside : int
-        """
-        UV = self._positions(theta)
-        # clip positions into the image so that every gather stays in the array; a sample is
-        # inside (0 <= u <= W - 1, 0 <= v <= H - 1) iff clipping did not move it
-        C = np.minimum(np.maximum(UV, 0.0), self._hi)
-        inside = (C == UV).all(axis=0)
-        n_inside = int(np.count_nonzero(inside))
-        if n_inside == 0:
-            return np.zeros(self.shape), 0
-        C0 = np.minimum(C.astype(np.intp), self._hi0)  # u = W - 1 interpolates with weight 1 on the last column
-        F = C - C0
-        fu, fv = F[0], F[1]
-        i = C0[1] * self._Wm
-        i += C0[0]
-        G = self._table.take(i, axis=1)
+    def histogram_numpy(self, theta) -> tuple[np.ndarray, int]:
+        """:meth:`__call__` in numpy (2^d corners): the reference of the compiled pass, and its fallback."""
+        U = self.positions(theta)
+        keep = inside(U, self._size[: self.dim])
+        neighbours = corners(U[:, keep], self._size[: self.dim])
+        fbk = self._fbk[keep]
         K = self.n_cells
-        if self.interpolation == "bilinear":
-            val = G[2] + fu * G[3]
-            val *= fv
-            val += G[0]
-            val += fu * G[1]
-            idx = val.astype(np.intp)  # in bin units, >= 0
-            np.minimum(idx, self._mbins_last, out=idx)
-            idx += self._fbk
-            idx = np.where(inside, idx, K)  # outside samples go to a dropped extra cell
-            h = np.bincount(idx, minlength=K + 1)[:K].astype(np.float64)
+        if self.mode == "pv":
+            h = sum(np.bincount(fbk + self._mbins[c], weights=w, minlength=K) for w, c in neighbours)
         else:
-            # four weighted bincounts (one per neighbour) are ~3x faster than one on the concatenation
-            fbk = self._fbk
-            gu = 1.0 - fu
-            gv = (1.0 - fv) * inside
-            fv = fv * inside
-            h = np.bincount(fbk + G[0], weights=gu * gv, minlength=K)
-            h += np.bincount(fbk + G[1], weights=fu * gv, minlength=K)
-            h += np.bincount(fbk + G[2], weights=gu * fv, minlength=K)
-            h += np.bincount(fbk + G[3], weights=fu * fv, minlength=K)
-        return h.reshape(self.shape), n_inside
+            val = sum(w * self._mflat[c] for w, c in neighbours)
+            if self.mode == "linear":
+                h = np.bincount(fbk + np.clip(np.floor(val + 0.5).astype(np.intp), 0, self._bmax), minlength=K)
+            else:
+                val = np.clip(val, 0.0, self._bmax)
+                m0 = np.minimum(val.astype(np.intp), max(self._bmax - 1, 0))
+                h = np.bincount(fbk + m0, weights=1.0 - (val - m0), minlength=K + 1)[:K]
+                h = h + np.bincount(fbk + m0 + 1, weights=val - m0, minlength=K + 1)[:K]
+        return np.asarray(h, dtype=np.float64).reshape(self.shape), int(np.count_nonzero(keep))
+
+
+def compiled() -> bool:
+    """Whether the compiled pass is installed (else every histogram is computed in numpy)."""
+    return _compiled is not None
+

@@ -1,45 +1,33 @@
-"""Reading 2D images: PNG/TIFF/JPEG/BMP (Pillow), NIfTI (nibabel), DICOM/MetaImage/NRRD (SimpleITK).
+"""Reading and writing the registration's images, 2D and 3D: PNG/TIFF/JPEG/BMP (Pillow); NIfTI (nibabel's voxels,
+SimpleITK's reading of the header); MetaImage, NRRD, DICOM files and series folders (SimpleITK).
 
-Every reader returns the same thing: a float64 array indexed ``[row, col]`` and the pixel
-spacing ``(row, col)`` (1 for PNG/TIFF/JPEG/BMP, whose dpi is a print resolution). Arrays
-follow SimpleITK's index order, so a NIfTI file read here equals
-``sitk.GetArrayFromImage(sitk.ReadImage(path))`` (nibabel's ``(i, j, k)`` data is transposed
-to ``(k, j, i)``). A volume is reduced to 2D by ``slice_index`` along ``axis`` of
-that ``(k, j, i)`` array (axis 0 = slices); singleton axes are dropped. Colour images become
-their luminance ``0.299 R + 0.587 G + 0.114 B`` (alpha dropped).
-
-Every problem is an :class:`~topomatch.pipeline.errors.InputError` naming the file: missing or
-unreadable file, unknown format, a 3D volume without a slice, an empty image, NaN or infinite
-pixels, a constant image (nothing to register), and in :func:`load_pair` a fixed and a moving
-image of different dimensionality.
+Every reader returns an :class:`Image` in SimpleITK's array order with ITK's geometry as SimpleITK reads it
+(LPS mm), a Pillow image with spacing 1 and origin 0. Two axes of more than one pixel make a 2D image, three a
+volume; ``slice_index`` takes a 2D slice of a volume. Every problem is an
+:class:`~topomatch.pipeline.errors.InputError` naming the file (docs/registration.md, "Bad input").
 """
 
 from __future__ import annotations
 
+import contextlib
+import locale
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from pydantic import Field
-from topomatch.pipeline.contract import (
-    InputError,
-    Params,
-    StageResult,
-    check_readable_file,
-    limit_from_env,
-    stage,
-)
+
+from topomatch.pipeline.contract import InputError, Params, StageResult, check_readable_file, limit_from_env, stage
 from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.transform import RigidTransform
 
 PILLOW_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp")
-NIFTI_SUFFIXES = (".nii", ".nii.gz")
-SITK_SUFFIXES = (".dcm", ".dicom", ".ima", ".mha", ".mhd", ".nrrd", ".nhdr")
-SUPPORTED = PILLOW_SUFFIXES + NIFTI_SUFFIXES + SITK_SUFFIXES
+SITK_SUFFIXES = (".nii", ".nii.gz", ".dcm", ".dicom", ".ima", ".mha", ".mhd", ".nrrd", ".nhdr")
+SUPPORTED = PILLOW_SUFFIXES + SITK_SUFFIXES
 
-
-#: Most pixels (or voxels) an image may hold, checked from the file's header before its pixels are
-#: decoded, so that a small file cannot claim gigabytes; ``$TOPOMATCH_MAX_IMAGE_PIXELS`` overrides it.
+#: Most pixels an image may hold, checked from the file's header before its pixels are decoded, so that a
+#: small file cannot claim gigabytes; ``$TOPOMATCH_MAX_IMAGE_PIXELS`` overrides it.
 MAX_PIXELS = 100_000_000
 
 
@@ -47,7 +35,7 @@ def max_pixels() -> int:
     return limit_from_env("TOPOMATCH_MAX_IMAGE_PIXELS", MAX_PIXELS)
 
 
-def _check_size(path: Path, shape: tuple[int, ...]) -> None:
+def _check_size(path: Path, shape) -> None:
     """Refuse an image whose header declares more than :func:`max_pixels` pixels."""
     n, limit = math.prod(int(s) for s in shape), max_pixels()
     if n > limit:
@@ -62,16 +50,60 @@ def image_format(path: str | Path) -> str:
         if name.endswith(suffix):
             return suffix
     raise InputError(path, f"unsupported image format {Path(path).suffix or '(no suffix)'!r}; expected one of "
-                           f"{', '.join(SUPPORTED)}")
+                           f"{', '.join(SUPPORTED)} or a DICOM series folder")
 
 
 def _stem(path: Path) -> str:
-    name = path.name
+    if path.is_dir():
+        return path.name
     fmt = image_format(path)
-    return name[: -len(fmt)] if name.lower().endswith(fmt) else path.stem
+    return path.name[: -len(fmt)] if path.name.lower().endswith(fmt) else path.stem
 
 
-def _read_pillow(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
+@contextlib.contextmanager
+def keep_locale():
+    """Restore the process locale afterwards: ITK's GDCM calls can set it to "C" and leave it there (Python's
+    default text encoding then becomes ASCII for the rest of the process)."""
+    saved = locale.setlocale(locale.LC_ALL)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(locale.Error):
+            locale.setlocale(locale.LC_ALL, saved)
+
+
+def _sitk_detail(exc: Exception) -> str:
+    lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
+    return lines[-1] if lines else "SimpleITK could not read it"
+
+
+def _dicom_files(folder: Path) -> list[str]:
+    """The file names of the one DICOM series in ``folder`` (InputError for none or several)."""
+    import SimpleITK as sitk
+
+    ids = sitk.ImageSeriesReader.GetGDCMSeriesIDs(str(folder))
+    if not ids:
+        raise InputError(folder, "is a folder without a DICOM series; give a DICOM series folder or an image file")
+    if len(ids) > 1:
+        counts = [f"{sid} ({len(sitk.ImageSeriesReader.GetGDCMSeriesFileNames(str(folder), sid))} files)"
+                  for sid in ids]
+        raise InputError(folder, f"holds {len(ids)} DICOM series ({'; '.join(counts)}); a registration input is one "
+                                 f"series: put each series in its own folder")
+    return list(sitk.ImageSeriesReader.GetGDCMSeriesFileNames(str(folder), ids[0]))
+
+
+def _checked(path: str | Path) -> Path:
+    path = Path(path)
+    if path.is_dir():
+        return path
+    path = check_readable_file(path)
+    if path.stat().st_size == 0:
+        raise InputError(path, "file is empty (0 bytes)")
+    image_format(path)
+    return path
+
+
+def _read_pillow(path: Path) -> np.ndarray:
     from PIL import Image as PILImage
     from PIL import UnidentifiedImageError
 
@@ -80,153 +112,101 @@ def _read_pillow(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
         with PILImage.open(path) as im:
             _check_size(path, (im.size[1], im.size[0]))
             im.load()
-            frames = getattr(im, "n_frames", 1)
-            if frames > 1:
-                raise InputError(path, f"multi-page image with {frames} pages; registration reads single 2D images")
+            if getattr(im, "n_frames", 1) > 1:
+                raise InputError(path, f"multi-page image with {im.n_frames} pages; registration reads one image")
             if im.mode == "P":
                 im = im.convert("RGBA" if "transparency" in im.info else "RGB")
             elif im.mode in ("LA", "PA"):
                 im = im.convert("L")
             elif im.mode == "CMYK":
                 im = im.convert("RGB")
-            arr = np.asarray(im)
+            return np.asarray(im)
     except (UnidentifiedImageError, OSError, SyntaxError, ValueError) as exc:
         raise InputError(path, f"cannot read image ({type(exc).__name__}: {exc})") from None
-    return arr, (1.0, 1.0)  # print resolution (dpi) is not a pixel spacing
 
 
-def _read_nifti(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
-    import nibabel as nib
+def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...], tuple[float, ...], np.ndarray]:
+    """The grey pixel array of a file (SimpleITK's array order, axes of one pixel dropped) and its spacing,
+    origin and direction (ITK order, over the kept axes)."""
+    path = _checked(path)
+    fmt = "" if path.is_dir() else image_format(path)
+    if fmt in PILLOW_SUFFIXES:
+        try:
+            arr = _read_pillow(path)
+            if arr.ndim == 3 and arr.shape[-1] in (3, 4) and min(arr.shape[:2]) > 4:
+                arr = arr[..., :3].astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+            return arr, (1.0,) * arr.ndim, (0.0,) * arr.ndim, np.eye(arr.ndim)
+        except InputError:
+            if fmt not in (".tif", ".tiff"):
+                raise  # TIFF variants Pillow cannot decode go to SimpleITK
+    arr, spacing, origin, direction = _read_nifti(path) if fmt in (".nii", ".nii.gz") else _read_with_sitk(path)
+    d = arr.ndim
+    keep = [a for a in range(d) if arr.shape[d - 1 - a] > 1]  # ITK axes of more than one pixel
+    direction = np.asarray(direction).reshape(d, d)[np.ix_(keep, keep)]
+    if len(keep) < d and not abs(np.linalg.det(direction)) > 1e-6:
+        direction = np.eye(len(keep))
+    arr = arr.reshape([arr.shape[d - 1 - a] for a in reversed(keep)])
+    return arr, tuple(spacing[a] for a in keep), tuple(origin[a] for a in keep), direction
 
-    try:
-        img = nib.load(str(path))
-    except Exception as exc:  # nibabel raises many types for a corrupt file
-        raise InputError(path, f"cannot read NIfTI file ({type(exc).__name__}: {exc})") from None
-    _check_size(path, img.shape)
-    try:
-        data = np.asarray(img.dataobj)
-        zooms = tuple(float(z) for z in img.header.get_zooms())
-    except Exception as exc:  # nibabel raises many types for a corrupt file
-        raise InputError(path, f"cannot read NIfTI file ({type(exc).__name__}: {exc})") from None
-    while data.ndim > 3 and data.shape[-1] == 1:  # drop trailing singleton time/vector axes
-        data = data[..., 0]
-    # nibabel: data[i, j, k] with i = x; SimpleITK's array is [k, j, i]: transpose to match it
-    data = data.T
-    zooms = tuple(reversed(zooms[: data.ndim]))
-    return data, zooms
 
-
-def _read_sitk(path: Path) -> tuple[np.ndarray, tuple[float, ...]]:
+def _read_with_sitk(path: Path):
+    """Pixels (SimpleITK's array order; colour as luminance), spacing, origin, direction of a file or DICOM series
+    folder SimpleITK reads (a trailing axis of one dropped)."""
     import SimpleITK as sitk
 
     try:
-        reader = sitk.ImageFileReader()
-        reader.SetFileName(str(path))
-        reader.ReadImageInformation()
-        _check_size(path, tuple(reader.GetSize()) + ((reader.GetNumberOfComponents(),)
-                                                     if reader.GetNumberOfComponents() > 1 else ()))
-        img = reader.Execute()
+        with keep_locale():
+            reader = sitk.ImageFileReader()
+            files = _dicom_files(path) if path.is_dir() else [str(path)]
+            reader.SetFileName(files[0])
+            reader.ReadImageInformation()
+            components = reader.GetNumberOfComponents()
+            size = tuple(reader.GetSize()[:2]) + (len(files),) if path.is_dir() else tuple(reader.GetSize())
+            _check_size(path, size + ((components,) if components > 1 else ()))
+            image = sitk.ReadImage(files) if path.is_dir() else reader.Execute()
     except RuntimeError as exc:
-        detail = str(exc).strip().splitlines()[-1] if str(exc).strip() else "SimpleITK could not read it"
+        raise InputError(path, f"cannot read image ({_sitk_detail(exc)})") from None
+    if image.GetDimension() == 4:
+        if image.GetSize()[3] != 1:
+            raise InputError(path, f"is a 4D image ({' x '.join(map(str, image.GetSize()))}: {image.GetSize()[3]} "
+                                   f"volumes, e.g. a time series); extract one 3D volume first (e.g. sitk.Extract)")
+        image = sitk.Extract(image, list(image.GetSize()[:3]) + [0], [0, 0, 0, 0])
+    arr = sitk.GetArrayFromImage(image)
+    components = image.GetNumberOfComponentsPerPixel()
+    if components > 1:
+        if image.GetDimension() != 2 or components not in (3, 4):
+            raise InputError(path, f"has {components} components per pixel (colour or vector data); registration "
+                                   f"needs one intensity per pixel")
+        arr = arr[..., :3].astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+    return arr, image.GetSpacing(), image.GetOrigin(), image.GetDirection()
+
+
+def _read_nifti(path: Path):
+    """A NIfTI file's voxels read by nibabel (SimpleITK's reader turns NaN into 0 and zero-fills a truncated file),
+    in SimpleITK's array order, with the geometry as SimpleITK reads the header (no pixels read by it)."""
+    import nibabel as nib
+    import SimpleITK as sitk
+
+    reader = sitk.ImageFileReader()
+    reader.SetFileName(str(path))
+    try:
+        reader.ReadImageInformation()
+        _check_size(path, reader.GetSize())
+        data = np.asarray(nib.load(str(path)).dataobj)
+    except Exception as exc:  # SimpleITK's RuntimeError, nibabel's many types for a damaged file
+        detail = _sitk_detail(exc) if isinstance(exc, RuntimeError) else f"{type(exc).__name__}: {exc}"
         raise InputError(path, f"cannot read image ({detail})") from None
-    return sitk.GetArrayFromImage(img), tuple(reversed(img.GetSpacing()))
-
-
-def _to_grey(arr: np.ndarray) -> np.ndarray:
-    """Luminance of an RGB(A) array (last axis of length 3 or 4 on a 2D image); others unchanged."""
-    if arr.ndim == 3 and arr.shape[-1] in (3, 4) and arr.shape[0] > 4 and arr.shape[1] > 4:
-        rgb = arr[..., :3].astype(np.float64)
-        return rgb @ np.array([0.299, 0.587, 0.114])
-    return arr
-
-
-def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...]]:
-    """The raw pixel array of an image file (grey, singleton axes dropped) and its spacing.
-
-    2D images give ``(H, W)``, volumes ``(k, j, i)`` (SimpleITK order); spacing has one entry
-    per axis. Raises :class:`InputError` for a missing, unreadable or unsupported file.
-    """
-    path = check_readable_file(path)
-    if path.stat().st_size == 0:
-        raise InputError(path, "file is empty (0 bytes)")
-    fmt = image_format(path)
-    if fmt in PILLOW_SUFFIXES:
-        try:
-            arr, spacing = _read_pillow(path)
-        except InputError:
-            if fmt not in (".tif", ".tiff"):
-                raise
-            arr, spacing = _read_sitk(path)  # TIFF variants Pillow cannot decode
-    elif fmt in NIFTI_SUFFIXES:
-        arr, spacing = _read_nifti(path)
-    else:
-        arr, spacing = _read_sitk(path)
-    arr = _to_grey(np.asarray(arr))
-    spacing = tuple(float(s) for s in spacing)
-    if len(spacing) != arr.ndim:
-        spacing = (1.0,) * arr.ndim
-    if arr.ndim >= 3 and 1 in arr.shape:
-        keep = [a for a in range(arr.ndim) if arr.shape[a] != 1]
-        spacing = tuple(spacing[a] for a in keep)
-        arr = arr.reshape([arr.shape[a] for a in keep])
-    return arr, spacing
-
-
-def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 0,
-               strict_slice: bool = True) -> Image:
-    """Read a 2D image (or one slice of a volume) as float64 ``[row, col]`` with its spacing.
-
-    Parameters
-    ----------
-    path : str or Path
-        PNG, TIFF, JPEG, BMP, NIfTI (``.nii``, ``.nii.gz``), DICOM (``.dcm``), MetaImage
-        (``.mha``, ``.mhd``) or NRRD file.
-    slice_index : int, optional
-        For a 3D volume: the slice to take along ``axis`` (negative counts from the end).
-        For a 2D image an error, unless ``strict_slice`` is False (then ignored: the
-        ``load_image`` stage, so that one config can mix slices and PNGs).
-    axis : {0, 1, 2}
-        Axis of the volume's ``(k, j, i)`` array (SimpleITK order) that ``slice_index`` indexes.
-
-    Returns
-    -------
-    Image
-        ``data`` (H, W) float64, ``spacing`` (row, col).
-
-    Raises
-    ------
-    InputError
-        Missing, unreadable or unsupported file; a volume without ``slice_index`` or an index out
-        of range; an empty, non-finite or constant image.
-    """
-    path = Path(path)
-    arr, spacing = read_array(path)
-    return _image_from_array(path, arr, spacing, slice_index, axis, strict_slice)
-
-
-def _image_from_array(path: Path, arr: np.ndarray, spacing: tuple[float, ...], slice_index: int | None,
-                      axis: int, strict_slice: bool = True) -> Image:
-    source = str(path)
-    if arr.ndim == 3:
-        if slice_index is None:
-            raise InputError(path, f"is a 3D volume of shape {arr.shape} (slices, rows, cols); registration is 2D: "
-                                   f"choose a slice (--fixed-slice / --moving-slice; in a config load_image.slice, "
-                                   f"load_pair.fixed_slice / moving_slice)")
-        n = arr.shape[axis]
-        if not -n <= slice_index < n:
-            raise InputError(path, f"slice {slice_index} is out of range: the volume has {n} slices along axis "
-                                   f"{axis} (0 to {n - 1})")
-        arr = np.take(arr, slice_index, axis=axis)
-        spacing = tuple(s for a, s in enumerate(spacing) if a != axis)
-        source = f"slice {slice_index % n} (axis {axis}) of {path}"
-    elif arr.ndim == 2 and slice_index is not None and strict_slice:
-        raise InputError(path, f"is a 2D image ({arr.shape[0]} x {arr.shape[1]} pixels): a slice ({slice_index}) "
-                               f"applies only to a 3D volume; leave the slice out")
-    if arr.ndim != 2:
-        raise InputError(path, f"is a {arr.ndim}D image of shape {arr.shape}: only 2D images and slices of 3D "
-                               f"volumes can be registered")
-    data = check_pixels(arr, path)
-    return Image(data, (spacing[0], spacing[1]), _stem(path), source)
+    while data.ndim > 3 and data.shape[-1] == 1:
+        data = data[..., 0]
+    if data.ndim > 3:
+        raise InputError(path, f"is a {data.ndim}D image ({' x '.join(map(str, data.shape))}: {data.shape[3]} volumes, "
+                               f"e.g. a time series); extract one 3D volume first (e.g. sitk.Extract or fslroi)")
+    if data.dtype.names:
+        raise InputError(path, f"has {len(data.dtype.names)} components per voxel (colour or vector data); "
+                               f"registration needs one intensity per voxel")
+    d, n = data.ndim, reader.GetDimension()
+    direction = np.array(reader.GetDirection()).reshape(n, n)[:d, :d]
+    return data.T, reader.GetSpacing()[:d], reader.GetOrigin()[:d], direction
 
 
 def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
@@ -235,7 +215,7 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
     Raises
     ------
     InputError
-        Empty, non-numeric, NaN/infinite, or constant (zero intensity range) pixels.
+        Empty, non-numeric, NaN/infinite, constant, or fewer than 4 pixels along an axis.
     """
     if arr.size == 0 or 0 in arr.shape:
         raise InputError(path, f"image is empty (shape {arr.shape})")
@@ -249,8 +229,98 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
     if hi - lo <= 0:
         raise InputError(path, f"image is constant (every pixel is {lo:g}): it has no structure to register")
     if min(data.shape) < 4:
-        raise InputError(path, f"image is too small to register (shape {data.shape}; at least 4 x 4)")
+        hint = "; a stack of 2D images: register one slice (--fixed-slice / --moving-slice)" if data.ndim == 3 else ""
+        raise InputError(path, f"image is too small to register (shape {data.shape}; at least 4 pixels per axis{hint})")
     return data
+
+
+def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 0, strict_slice: bool = True) -> Image:
+    """Read a 2D image or a 3D volume (or one 2D slice of a volume) with its physical geometry.
+
+    Parameters
+    ----------
+    path : str or Path
+        PNG, TIFF, JPEG, BMP, NIfTI, MetaImage, NRRD, DICOM file, or a DICOM series folder.
+    slice_index : int, optional
+        For a volume: the 2D slice to take along ``axis`` of its ``(k, j, i)`` array (negative counts from
+        the end). For a 2D image an error, unless ``strict_slice`` is False (then ignored: a config's slice
+        applies to its volumes, so that one config can mix volumes and PNGs).
+    axis : {0, 1, 2}
+
+    Raises
+    ------
+    InputError
+        See the module docstring; the message names the file.
+    """
+    path = Path(path)
+    arr, spacing, origin, direction = read_array(path)
+    source = str(path)
+    if arr.ndim == 3 and slice_index is not None:
+        n = arr.shape[axis]
+        if not -n <= slice_index < n:
+            raise InputError(path, f"slice {slice_index} is out of range: the volume has {n} slices along axis "
+                                   f"{axis} (0 to {n - 1})")
+        arr = np.take(arr, slice_index, axis=axis)
+        spacing = tuple(s for a, s in enumerate(spacing) if a != 2 - axis)
+        origin, direction = (0.0, 0.0), np.eye(2)
+        source = f"slice {slice_index % n} (axis {axis}) of {path}"
+    elif arr.ndim == 2 and slice_index is not None and strict_slice:
+        raise InputError(path, f"is a 2D image ({arr.shape[0]} x {arr.shape[1]} pixels): a slice ({slice_index}) "
+                               f"applies only to a 3D volume; leave the slice out")
+    if arr.ndim not in (2, 3):
+        raise InputError(path, f"is a {arr.ndim}D image of shape {arr.shape}: only 2D images and 3D volumes can be "
+                               f"registered")
+    return Image(check_pixels(arr, path), spacing, origin, direction, _stem(path), source)
+
+
+def image_dimension(path: str | Path) -> int:
+    """How many axes of more than one pixel the image at ``path`` has (from its header; 3 for a DICOM series
+    folder, 2 for the Pillow formats). InputError if unreadable."""
+    path = _checked(path)
+    if path.is_dir():
+        return 3
+    if image_format(path) in PILLOW_SUFFIXES:
+        return 2
+    import SimpleITK as sitk  # here: importing it costs ~0.06 s, a third of a 2D registration
+
+    reader = sitk.ImageFileReader()
+    reader.SetFileName(str(path))
+    try:
+        with keep_locale():
+            reader.ReadImageInformation()
+    except RuntimeError as exc:
+        raise InputError(path, f"cannot read image ({_sitk_detail(exc)})") from None
+    return sum(1 for s in reader.GetSize() if s > 1)
+
+
+def to_sitk(image: Image, data: np.ndarray | None = None):
+    """A float32 SimpleITK image with the image's geometry (and ``data`` instead of its pixels if given)."""
+    import SimpleITK as sitk
+
+    out = sitk.GetImageFromArray(np.ascontiguousarray(image.data if data is None else data, dtype=np.float32))
+    out.SetSpacing(image.spacing)
+    out.SetOrigin(image.origin)
+    out.SetDirection(tuple(image.direction.ravel()))
+    return out
+
+
+def write_transform(transform: RigidTransform, path: str | Path) -> None:
+    """T as an ITK transform file (``.tfm``/``.txt``, or ``.h5``) readable by ``sitk.ReadTransform``."""
+    import SimpleITK as sitk
+
+    sitk.WriteTransform(transform.to_sitk(), str(path))
+
+
+def output_suffix(path: str | Path) -> str:
+    """The suffix of an image written "in the input's format": its own (``.mhd`` -> ``.mha``, ``.nhdr`` ->
+    ``.nrrd``), ``.nii.gz`` for DICOM, ``.png`` for Pillow formats."""
+    path = Path(path)
+    if path.is_dir():
+        return ".nii.gz"
+    fmt = image_format(path)
+    if fmt in PILLOW_SUFFIXES:
+        return ".png"
+    return {".mhd": ".mha", ".nhdr": ".nrrd", ".dcm": ".nii.gz", ".dicom": ".nii.gz", ".ima": ".nii.gz"}.get(fmt, fmt)
 
 
 # --------------------------------------------------------------------------- stages
@@ -259,16 +329,21 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
 class LoadImageParams(Params):
     """Parameters of :func:`load_image`."""
 
-    slice: int | None = Field(None, description="slice of a 3D volume along `axis` (2D images ignore it)")
+    slice: int | None = Field(None, description="2D slice of a 3D volume along `axis` (2D images ignore it)")
     axis: int = Field(0, ge=0, le=2, description="volume axis of `slice` in (k, j, i) = SimpleITK array order")
 
 
 class LoadPairParams(Params):
     """Parameters of :func:`load_pair`."""
 
-    fixed_slice: int | None = Field(None, description="slice of the fixed image if it is a 3D volume")
-    moving_slice: int | None = Field(None, description="slice of the moving image if it is a 3D volume")
+    fixed_slice: int | None = Field(None, description="2D slice of the fixed image if it is a 3D volume")
+    moving_slice: int | None = Field(None, description="2D slice of the moving image if it is a 3D volume")
     axis: int = Field(0, ge=0, le=2, description="volume axis of the slices in (k, j, i) = SimpleITK array order")
+
+
+def _describe(image: Image) -> dict:
+    return {"size": "x".join(map(str, image.size)), "spacing": list(image.spacing),
+            "min": float(image.data.min()), "max": float(image.data.max())}
 
 
 @dataclass(frozen=True, eq=False)
@@ -278,44 +353,56 @@ class LoadImageResult(StageResult):
     image: Image
 
     def summary(self) -> dict:
-        H, W = self.image.shape
-        return {"rows": H, "cols": W, "spacing_row": self.image.spacing[0], "spacing_col": self.image.spacing[1],
-                "min": float(self.image.data.min()), "max": float(self.image.data.max())}
+        return _describe(self.image)
 
 
 @dataclass(frozen=True, eq=False)
 class LoadPairResult(StageResult):
-    """A fixed (reference) and a moving (target) image."""
+    """A fixed (reference) and a moving image, both 2D or both 3D."""
 
     fixed: Image
     moving: Image
 
     def summary(self) -> dict:
-        return {"fixed_shape": "x".join(map(str, self.fixed.shape)), "moving_shape": "x".join(map(str, self.moving.shape)),
-                "fixed_spacing": list(self.fixed.spacing), "moving_spacing": list(self.moving.spacing)}
+        return {f"{role}_{k}": v for role, im in (("fixed", self.fixed), ("moving", self.moving))
+                for k, v in _describe(im).items() if k in ("size", "spacing")}
 
 
-@stage("load_image", params=LoadImageParams, version=1, consumes=("path",), produces=("image",))
+@stage("load_image", params=LoadImageParams, version=2, consumes=("path",), produces=("image",))
 def load_image(path: str, *, params: LoadImageParams) -> LoadImageResult:
-    """Read one 2D image (PNG, TIFF, NIfTI, DICOM, MetaImage), or one slice of a volume."""
-    # a config's slice applies to its volumes; its 2D images are read whole (inputs may mix both)
+    """Read one 2D image or 3D volume (PNG, TIFF, NIfTI, DICOM, MetaImage, NRRD), or one slice of a volume."""
     return LoadImageResult(read_image(path, slice_index=params.slice, axis=params.axis, strict_slice=False))
 
 
-@stage("load_pair", params=LoadPairParams, version=1, consumes=("fixed_path", "moving_path"),
+def read_pair(fixed_path: str | Path, moving_path: str | Path, params: LoadPairParams = LoadPairParams()):
+    """Both images, after checking that they have one dimensionality (InputError naming the odd one)."""
+    paths = {"fixed": Path(fixed_path), "moving": Path(moving_path)}
+    slices = {"fixed": params.fixed_slice, "moving": params.moving_slice}
+    dims = {role: 2 if slices[role] is not None else image_dimension(p) for role, p in paths.items()}
+    for role in dims:
+        if dims[role] not in (2, 3):
+            read_image(paths[role])  # the reader's own message (a 4D series, a line of pixels)
+    if dims["fixed"] != dims["moving"]:
+        role = max(dims, key=dims.get)
+        other = "moving" if role == "fixed" else "fixed"
+        raise InputError(paths[role], f"the {role} image is {dims[role]}D but the {other} image "
+                                      f"{paths[other].name} is {dims[other]}D: images of different dimensionality "
+                                      f"cannot be registered; give --{role}-slice (load_pair.{role}_slice in a "
+                                      f"config) to take a 2D slice")
+    return tuple(read_image(paths[r], slice_index=slices[r], axis=params.axis) for r in ("fixed", "moving"))
+
+
+@stage("load_pair", params=LoadPairParams, version=2, consumes=("fixed_path", "moving_path"),
        produces=("fixed", "moving"))
 def load_pair(fixed_path: str, moving_path: str, *, params: LoadPairParams) -> LoadPairResult:
-    """Read a fixed and a moving image; both must be 2D (or reduced to 2D by a slice)."""
-    fixed_path, moving_path = Path(fixed_path), Path(moving_path)
-    (fa, fs), (ma, ms) = read_array(fixed_path), read_array(moving_path)
-    dims = {fixed_path: (fa.ndim, params.fixed_slice), moving_path: (ma.ndim, params.moving_slice)}
-    if fa.ndim != ma.ndim and params.fixed_slice is None and params.moving_slice is None:
-        vol, flat = (moving_path, fixed_path) if ma.ndim > fa.ndim else (fixed_path, moving_path)
-        role = "moving" if vol == moving_path else "fixed"
-        raise InputError(vol, f"the {role} image is {dims[vol][0]}D ({'x'.join(map(str, (ma if vol == moving_path else fa).shape))}) "
-                              f"but the {'fixed' if role == 'moving' else 'moving'} image {flat.name} is "
-                              f"{dims[flat][0]}D: images of different dimensionality cannot be registered; "
-                              f"give --{role}-slice (load_pair.{role}_slice in a config) to take a 2D slice")
-    fixed = _image_from_array(fixed_path, fa, fs, params.fixed_slice, params.axis)
-    moving = _image_from_array(moving_path, ma, ms, params.moving_slice, params.axis)
-    return LoadPairResult(fixed, moving)
+    """Read a fixed and a moving image: two 2D images (or slices) or two 3D volumes."""
+    return LoadPairResult(*read_pair(fixed_path, moving_path, params))
+
+
+def read_volume(path: str | Path) -> Image:
+    """:func:`read_image` of a file that must be a 3D volume (InputError naming it otherwise)."""
+    image = read_image(path)
+    if image.dim != 3:
+        raise InputError(path, f"is a {image.dim}D image ({' x '.join(map(str, image.size))}); a 3D registration "
+                               f"needs volumes (NIfTI, MetaImage, NRRD, DICOM)")
+    return image

@@ -1,17 +1,11 @@
-"""Parameters of :func:`~topomatch.stages.registration.register.register`, in the split that DIPY's
-``AffineRegistration`` and SimpleITK's ``ImageRegistrationMethod`` use:
+"""Parameters of :func:`~topomatch.stages.registration.register.register`, 2D and 3D alike, grouped as DIPY's
+``AffineRegistration`` and SimpleITK's ``ImageRegistrationMethod`` group them: ``metric``, ``optimizer``,
+``schedule`` (a list of :class:`LevelSpec`), ``transform`` and ``start``, ``bounds``, ``sampling``, ``check``,
+``seed``. Angles in degrees, lengths in physical units (pixels for a PNG, mm for a volume); in a config
+``metric: mi`` is ``metric: {name: mi}``.
 
-- ``metric`` (:class:`MetricSpec`): which measure of the joint histogram, its order and weights;
-- ``optimizer`` (:class:`OptimizerSpec`): SPSA (the thesis's) or Powell, and SPSA's gains;
-- ``schedule`` (a list of :class:`LevelSpec`): the coarse-to-fine pyramid, per level its factor,
-  bins, interpolation, sample cap, iterations and step lengths;
-- ``transform`` (:class:`TransformSpec`): the rigid transform's initialisation;
-- ``bounds`` (:class:`BoundsSpec`): the search box around the initial transform;
-- ``check`` (:class:`CheckSpec`): the self-check that flags a result it cannot trust;
-- ``seed``: SPSA's perturbations and the sample subsets.
-
-Angles in degrees, lengths in pixels. In a config a group may be given by its name alone:
-``metric: mi`` is ``metric: {name: mi}``, ``optimizer: powell`` is ``optimizer: {name: powell}``.
+**The dimension enters here, once**: :data:`DIMENSION_DEFAULTS` holds what differs between 2D and 3D, applied
+by :func:`for_dimension` under whatever the caller set (a value from a config, the command line or the API wins).
 """
 
 from __future__ import annotations
@@ -42,7 +36,7 @@ class MetricSpec(_Named):
                                                                              "(thesis) or uniform")
     tmi_form: Literal["additive", "relative"] = Field("additive", description="Tsallis MI: pseudo-additive form or "
                                                                              "Tsallis relative entropy")
-    min_overlap: float = Field(0.25, gt=0, le=1, description="smallest accepted fraction of fixed pixels inside the "
+    min_overlap: float = Field(0.25, gt=0, le=1, description="smallest accepted fraction of fixed samples inside the "
                                                               "moving image (below it the measure is undefined)")
 
     def label(self) -> str:
@@ -66,97 +60,189 @@ class OptimizerSpec(_Named):
     gain_gamma: float = Field(0.101, gt=0, le=1, description="decay exponent of c_k (Spall: 0.101)")
     newton: float = Field(0.5, ge=0, allow_inf_nan=False, description="unnormalised SPSA: first gain at most this "
                                                                       "fraction of a Newton step (0: off)")
-    max_step: float | None = Field(None, gt=0, description="step blocking: longest step (level pixels)")
+    max_step: float | None = Field(None, gt=0, description="step blocking: longest step (physical units)")
     blocking: bool = Field(False, description="reject steps that lower the objective (one more evaluation each)")
     shrink: float = Field(1.0, gt=0, le=1, allow_inf_nan=False, description="multiply the gain by this when a step "
                                                                             "is blocked")
-    tol: float = Field(0.0, ge=0, description="stop a level when `window` steps are shorter (level pixels)")
+    tol: float = Field(0.0, ge=0, description="stop a level when `window` steps are shorter (physical units)")
     average_last: int = Field(1, ge=1, description="result of a level = mean of its last iterates")
 
 
 class LevelSpec(Params):
-    """One level of the coarse-to-fine schedule (lengths in the level's own pixels)."""
+    """One level of the coarse-to-fine schedule (lengths in physical units: pixels for a PNG, mm for a volume)."""
 
-    factor: int = Field(1, ge=1, description="pyramid factor: both images block-averaged by it")
+    spacing: float = Field(0.0, ge=0, allow_inf_nan=False,
+                           description="pixel size of the level: each axis block-averaged by the integer factor that "
+                                       "comes closest, never finer than native (0: native)")
     bins: int = Field(32, ge=2, le=1024, description="histogram bins of each image")
     iterations: int = Field(50, ge=1, description="optimiser iterations (Powell: 4x this many evaluations at most)")
-    step: float = Field(1.0, gt=0, allow_inf_nan=False, description="first step length a_0 (level pixels)")
-    c: float = Field(1.0, gt=0, allow_inf_nan=False, description="SPSA perturbation c (level pixels)")
+    step: float = Field(1.0, gt=0, allow_inf_nan=False, description="SPSA first step length a_0")
+    c: float = Field(1.0, gt=0, allow_inf_nan=False, description="SPSA perturbation c")
     average: int = Field(1, ge=1, description="SPSA gradient estimates averaged per iteration")
     gain_alpha: float = Field(0.602, gt=0, le=1, allow_inf_nan=False,
                               description="decay exponent of a_k (Spall: 0.602; 1 is the asymptotic optimum)")
-    interpolation: Literal["bilinear", "pv"] = Field("bilinear", description="bilinear intensities or "
-                                                                            "partial-volume weights")
-    samples: int | None = Field(None, ge=100, description="at most this many fixed pixels (random subset)")
-
-
-def default_schedule() -> list[LevelSpec]:
-    """Factor 4, 16 bins, 260 normalised SPSA iterations; factor 2, 24 bins, 40; full resolution, 32 bins,
-    partial volume, 6,000 samples, 30 iterations of two gradient estimates (chosen on the accuracy sweep
-    of docs/registration.md)."""
-    return [
-        LevelSpec(factor=4, bins=16, iterations=260, step=1.0, c=2.0),
-        LevelSpec(factor=2, bins=24, iterations=40, step=0.5, c=1.0),
-        LevelSpec(factor=1, bins=32, iterations=30, step=0.3, c=0.5, average=2, gain_alpha=1.0, interpolation="pv",
-                  samples=6000),
-    ]
+    interpolation: Literal["linear", "parzen", "pv"] = Field(
+        "parzen", description="linear: interpolated intensity to its bin; parzen: split between its two nearest "
+                              "bins; pv: partial volume (each neighbour's weight to its own bin)")
+    samples: int | None = Field(None, ge=100, description="at most this many fixed pixels (fixed-seed random subset)")
+    settle: float = Field(0.0, ge=0, allow_inf_nan=False,
+                          description="run the level again from its end while the last half of its iterations moved "
+                                      "the estimate by more than this (RMS displacement; 0: never)")
+    reruns: int = Field(0, ge=0, le=10, description="at most this many runs again (see settle)")
 
 
 class TransformSpec(Params):
-    """The rigid transform ``T(x) = R(angle)(x - c) + c + t`` and where it starts."""
+    """The rigid transform ``T(p) = R (p - c) + c + t`` and where it starts."""
 
     init: Literal["moments", "geometry"] = Field("moments", description="initial translation: map the intensity "
-                                                                       "centroids, or the image centres")
+                                                                       "centroids, or the grid centres")
+
+
+class StartSpec(Params):
+    """A search for the start: translations about the centre-mapping ones, scored at the coarsest level."""
+
+    steps: int = Field(0, ge=0, le=5, description="grid of (2 steps + 1)^d shifts about each centre-mapping "
+                                                 "translation and the identity (0: start at transform.init's)")
+    spacing: float = Field(12.0, gt=0, allow_inf_nan=False, description="grid spacing (physical units)")
+    candidates: int = Field(2, ge=0, description="best grid shifts optimised briefly at the coarsest level, besides "
+                                                 "the centres themselves")
+    iterations: int = Field(80, ge=0, description="coarsest-level iterations from each candidate")
 
 
 class BoundsSpec(Params):
-    """The search box around the initial transform."""
+    """The search box around the start."""
 
-    max_translation: float | None = Field(None, gt=0, description="search bound |tx|, |ty| from the initial "
-                                                                  "translation (default: half the smaller image side)")
-    max_angle: float = Field(60.0, gt=0, le=180, description="search bound |angle| (degrees)")
+    max_translation: float | None = Field(None, gt=0, description="bound on each translation from the start "
+                                                                  "(default: half the fixed image's smallest extent)")
+    max_angle: float = Field(60.0, gt=0, le=180, description="bound on each angle (degrees)")
+
+
+class SamplingSpec(Params):
+    """Which fixed pixels the joint histograms sample."""
+
+    region: Literal["all", "foreground"] = Field("foreground", description="every fixed pixel, or the fixed Otsu "
+                                                                          "foreground grown by `margin` (a mask given "
+                                                                          "to the API wins)")
+    margin: float = Field(16.0, ge=0, allow_inf_nan=False,
+                          description="grow the foreground by this distance (physical units), so that the object's "
+                                      "outline and a band around it are sampled: a moving image whose only structure "
+                                      "is the outline (a silhouette, a label map) has it there")
+    jitter: bool = Field(True, description="move each sample by a fixed random offset within its pixel")
 
 
 class CheckSpec(Params):
-    """The self-check: flag a result on a search bound, or one that a probe rotation beats."""
+    """The self-check: every test is on by a positive threshold (0 / false: off)."""
 
-    capture: bool = Field(True, description="flag results that a probe rotation beats (outside the capture range)")
-    probes: int = Field(24, ge=4, description="angles over the full circle of the coarse search")
+    search: bool = Field(True, description="coarse search: a better basin found from its best transforms flags the "
+                                           "result (and, with retry, replaces it)")
+    probes: int = Field(24, ge=4, description="2D: rotations over the full circle of the coarse search")
+    angles: list[float] = Field(default_factory=lambda: [-30.0, 30.0],
+                                description="3D: rotations of the coarse search about each axis (degrees), besides none")
     grid: int = Field(13, ge=1, description="translations per axis of the coarse search (over the search box)")
     min_content: float = Field(0.2, ge=0, le=1, allow_inf_nan=False,
                                description="flag a result that maps less than this fraction of the fixed image's "
-                                           "content (Otsu foreground) onto the moving image's content (0: off)")
+                                           "content (Otsu foreground) onto the moving image's content")
+    min_structure: float = Field(0.04, ge=0, allow_inf_nan=False,
+                                 description="flag a pair in which either image has less structure inside its "
+                                             "outline than this (interior over outline gradient, structure.py): a "
+                                             "mask or silhouette, whose outline alone fixes the transform only as "
+                                             "well as the two outlines correspond (0: off)")
     min_prominence: float = Field(6.0, ge=0, allow_inf_nan=False,
-                                  description="flag a result less than this many median absolute deviations "
-                                              "above the coarse search's median (0: off)")
-    min_flatness: float = Field(0.25, ge=0, le=1, allow_inf_nan=False,
-                                description="flag a result from which the coarse search's measure falls, in its "
-                                            "flattest direction, less than this fraction of its fall in the "
-                                            "steepest (6 search pixels away): a parameter the images do not "
-                                            "determine (0: off)")
+                                  description="flag a result less than this many median absolute deviations above "
+                                              "the coarse search's median")
+    min_flatness: float = Field(0.1, ge=0, le=1, allow_inf_nan=False,
+                                description="flag a result from which the measure, on a copy of the images scaled to "
+                                            "their content, falls in its flattest direction less than this fraction "
+                                            "of its fall in the steepest: a parameter the images do not determine")
+    overlap_bound: bool = Field(True, description="flag a result whose measure keeps rising where the images overlap "
+                                                  "less than min_overlap")
+    chance: float = Field(0.0, ge=0, description="flag a result whose measure is below this multiple of its chance "
+                                                 "level (the same samples with the fixed intensities paired at random)")
+    consistency: float = Field(0.014, ge=0, le=1, allow_inf_nan=False,
+                               description="flag a result at which a coarser level's measure is lower than at that "
+                                           "level's own end by more than this fraction of it: a finer level walked "
+                                           "away from the basin the coarser one found")
+    stability: float = Field(0.0, ge=0, allow_inf_nan=False,
+                             description="flag a result from which the finest level, run again on another sample of "
+                                         "the images, ends farther than this (physical units; 0: off)")
+    agreement: float = Field(1.0, ge=0, allow_inf_nan=False,
+                             description="flag a result farther than this (physical units) from the optimum of the "
+                                         "thesis's measure (JT, alpha 2, histogram weights) climbed from it at the "
+                                         "finest level: a measure whose own optimum is biased (0: off; no effect "
+                                         "with that measure)")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
-    refine: int = Field(20, ge=0, description="first-level iterations from the best probe before it is compared "
-                                              "with the result")
-    retry: bool = Field(True, description="when a probe wins, run the schedule once more from it (within the bounds)")
+    refine: int = Field(20, ge=0, description="coarsest-level iterations from each probe before the comparison")
+    retry: bool = Field(True, description="when a probe wins, adopt the result of the schedule run from it and check "
+                                          "again (once)")
     on_failure: Literal["flag", "error"] = Field("flag", description="flag a failed registration, or raise an error")
 
 
 class RegisterParams(Params):
-    """Parameters of :func:`~topomatch.stages.registration.register.register` (module docstring)."""
+    """Parameters of :func:`~topomatch.stages.registration.register.register` (module docstring); fields left
+    out take :data:`DIMENSION_DEFAULTS` for the images' dimension."""
 
     metric: MetricSpec = Field(default_factory=MetricSpec, description="the measure: name, alpha, weights, "
                                                                        "tmi_form, min_overlap")
     optimizer: OptimizerSpec = Field(default_factory=OptimizerSpec, description="spsa or powell, and SPSA's gains")
-    schedule: list[LevelSpec] = Field(default_factory=default_schedule, min_length=1,
-                                      description="coarse-to-fine levels: factor, bins, iterations, step, c, average, "
-                                                  "gain_alpha, interpolation, samples")
+    schedule: list[LevelSpec] = Field(default_factory=list, description="coarse-to-fine levels: spacing, bins, "
+                                      "iterations, step, c, average, gain_alpha, interpolation, samples, settle, "
+                                      "reruns (default: the dimension's, see docs/registration.md)")
     transform: TransformSpec = Field(default_factory=TransformSpec, description="initialisation of the transform")
+    start: StartSpec = Field(default_factory=StartSpec, description="search for the start (3D default: steps 2)")
     bounds: BoundsSpec = Field(default_factory=BoundsSpec, description="search box: max_translation, max_angle")
-    check: CheckSpec = Field(default_factory=CheckSpec, description="self-check: capture, probes, margin, "
-                                                                   "candidates, refine, retry, on_failure")
+    sampling: SamplingSpec = Field(default_factory=SamplingSpec, description="region, margin, jitter of the samples")
+    check: CheckSpec = Field(default_factory=CheckSpec, description="self-check: search, probes, thresholds, retry, "
+                                                                   "on_failure")
     seed: int = Field(0, ge=0, description="seed of the SPSA perturbations and of the sample subsets")
+    coarse_overlap_power: float = Field(0.0, ge=0, le=4, allow_inf_nan=False,
+                                        description="every level but the finest multiplies its measure by the "
+                                                    "overlap fraction to this power: a sliver of overlap cannot "
+                                                    "outscore the aligned position")
 
     def method(self) -> str:
         """A short label such as ``spsa/jt(alpha=2 histogram)``."""
         return f"{self.optimizer.name}/{self.metric.label()}"
+
+
+def _level(spacing, bins, iterations, step, c, interpolation, samples=None, **more) -> dict:
+    return dict(spacing=spacing, bins=bins, iterations=iterations, step=step, c=c, interpolation=interpolation,
+                samples=samples, **more)
+
+
+DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
+    2: {
+        # factors 4 and 2, then native pixels (the 2D accuracy sweep of docs/registration.md); 20,000 samples at the
+        # finest level; the thresholds of the self-check: the validation corpus's tune split (docs/registration.md)
+        "schedule": [_level(4.0, 16, 260, 4.0, 8.0, "parzen"), _level(2.0, 24, 40, 1.0, 2.0, "parzen"),
+                     _level(0.0, 32, 30, 0.3, 0.5, "parzen", 20000, average=2, gain_alpha=1.0)],
+    },
+    3: {
+        # 8, 4 and 2 mm (the 3D tune sets of docs/registration.md)
+        "schedule": [_level(8.0, 16, 150, 4.0, 4.0, "parzen", 4000), _level(4.0, 24, 60, 1.0, 2.0, "parzen", 8000),
+                     _level(2.0, 64, 40, 0.3, 1.0, "parzen", 30000, average=2, gain_alpha=1.0, settle=0.2,
+                            reruns=2)],
+        "start": {"steps": 2, "iterations": 40},
+        "bounds": {"max_angle": 45.0},
+        "coarse_overlap_power": 1.0,
+        "check": {"grid": 5, "min_content": 0.0, "min_prominence": 0.0, "min_flatness": 0.0, "overlap_bound": False,
+                  "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30},
+    },
+}
+
+
+def _merge(base: dict, top: dict) -> dict:
+    out = dict(base)
+    for key, value in top.items():
+        out[key] = _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
+
+
+def for_dimension(params: RegisterParams, dim: int) -> RegisterParams:
+    """``params`` with :data:`DIMENSION_DEFAULTS` of ``dim`` for every field the caller did not set."""
+    if dim not in DIMENSION_DEFAULTS:
+        raise ValueError(f"registration works on 2D and 3D images, got {dim}D")
+    given = params.model_dump(exclude_unset=True)
+    if not given.get("schedule"):
+        given.pop("schedule", None)
+    return RegisterParams.model_validate(_merge(DIMENSION_DEFAULTS[dim], given))

@@ -1,38 +1,12 @@
-"""Coarse-to-fine rigid registration: any measure (JT, JR, MI, TMI) with any optimiser (SPSA, Powell).
+"""Coarse-to-fine rigid registration of 2D images and 3D volumes: any measure (JT, JR, MI, TMI), SPSA or Powell.
 
-:func:`register` finds ``theta = (tx, ty, angle)`` (ITK convention, see
-:mod:`topomatch.stages.registration.transform`) maximising the chosen measure of the joint histogram of
-``fixed(x)`` and ``moving(T_theta(x))``:
-
-1. **Initialisation**: ``moments`` maps the fixed image's intensity centroid onto the moving
-   image's (angle 0); ``geometry`` maps centre onto centre (ITK's two
-   ``CenteredTransformInitializer`` modes).
-2. **Schedule** (coarse to fine): each :class:`LevelSpec` block-averages both images by its
-   ``factor`` and computes the measure with its own ``bins``, ``interpolation`` and sample cap;
-   the optimiser starts from the previous level's result. Step and perturbation lengths are in
-   the level's own pixels. The default schedule (factor 4, 16 bins, 260 normalised SPSA
-   iterations; factor 2, 24 bins, 40; full resolution, 32 bins, partial-volume interpolation,
-   6,000 samples, 30 iterations with two gradient estimates each) was chosen on the accuracy
-   sweep of ``docs/registration.md``: coarse levels win the capture range cheaply, the last one
-   the accuracy (bilinear interpolation biases multimodal optima by ~0.5 px, partial volume
-   does not).
-3. **Parameter scaling**: the angle is optimised in units of ``degrees(1 / r)`` with r the RMS
-   distance of the fixed pixels from the centre, so one unit moves the image by about one pixel,
-   like one unit of translation.
-4. **Self-check** (a failure is a flag and a reason, never a silent wrong answer): the result is
-   flagged when the measure is not finite (overlap below ``metric.min_overlap``), when an iterate of
-   the second half of a level sits on a search bound (``bounds``), or, with
-   ``check.capture``, when another basin is better: ``check.probes`` rotations over the full
-   circle (each with the translation that maps the intensity centroids) are scored at the
-   coarsest level, the ``check.candidates`` best ones away from the result's angle are refined
-   by ``check.refine`` first-level iterations, and one that ends elsewhere with a value higher
-   than the result's by ``check.margin`` (relative) flags it. With ``check.retry`` the schedule then
-   runs once more from that refined probe if it lies within the bounds (the first level
-   continuing its gain sequence), and the check is repeated. ``check.on_failure: error`` turns a flag
-   into a :class:`~topomatch.pipeline.contract.StageError`.
-
-The parameters (:mod:`topomatch.stages.registration.params`) are grouped as DIPY and SimpleITK
-group them: metric, optimizer, schedule, transform (initialisation), bounds, check.
+:func:`register` finds the parameters of ``T(p) = R (p - c) + c + t`` (:mod:`~topomatch.stages.registration.transform`)
+maximising a measure of chapter 2 of the joint histogram of ``fixed(p)`` and ``moving(T(p))``: a start (the
+intensity centroids; in 3D a search of translations), a pyramid of levels in physical units (each a
+:class:`~topomatch.stages.registration.objective.Objective` on its own :class:`JointHistogram`), SPSA or Powell
+per level with angles scaled by the RMS radius, and a self-check (:data:`CHECKS`, each test returning typed
+:class:`Flag` s). One run loop for both dimensions: the dimension enters through the transform's
+parametrisation and :func:`~topomatch.stages.registration.params.for_dimension`. See docs/registration.md.
 """
 
 from __future__ import annotations
@@ -45,28 +19,46 @@ from typing import Callable
 import numpy as np
 
 from topomatch.pipeline.contract import StageError, StageResult, stage
-from topomatch.stages.registration.image import Image
-from topomatch.stages.registration.objective import Level, Objective, build_pyramid, intensity_centroid, rms_radius
-from topomatch.stages.registration.params import LevelSpec, RegisterParams  # noqa: F401 (LevelSpec: the API)
-from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search
-from topomatch.stages.registration.powell import PowellSettings, powell_maximize
-from topomatch.stages.registration.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from topomatch.stages.registration.transform import RigidTransform, rotation_matrix
+from topomatch.stages.registration.histogram import Binning, JointHistogram
+from topomatch.stages.registration.image import Image, foreground_mask, grow, rms_radius
+from topomatch.stages.registration.objective import Objective
+from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_dimension
+from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
+from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
+from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
+from topomatch.stages.registration.structure import interior_structure
+from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
+
+MIN_LEVEL_VOXELS = 8
+"""Fewest pixels along any axis of a pyramid level; a coarser level shrinks that axis less."""
+MIN_LEVEL_SAMPLES = 2000
+"""Fewest fixed samples of a level's measure; a coarser level with fewer is measured on the grid of the first
+finer level with enough, smoothed (its schedule entry is kept)."""
+SMALL_FOV_SIGMA = 0.3
+"""Gaussian sigma, as a fraction of the level's spacing, that stands in for its block average on a finer grid (a
+block of width s has a standard deviation of s / sqrt(12) = 0.29 s)."""
+
+
+@dataclass(frozen=True)
+class Flag:
+    """One reason to distrust a result: the test that raised it and what it found."""
+
+    check: str
+    message: str
 
 
 @dataclass(frozen=True, eq=False)
 class Registration:
-    """The outcome of one registration (any method).
+    """The outcome of one registration (any method, either dimension).
 
     Attributes
     ----------
     transform : RigidTransform
-        ``T`` with ``moving(T(x)) ~ fixed(x)``, about the fixed image's centre.
+        T with ``fixed(p) ~ moving(T(p))``, about the fixed grid's centre.
     value : float
         The measure at ``transform`` (finest level; NaN for methods without one).
-    ok : bool
-        False when the self-check flagged the result; ``reason`` says why.
-    reason : str
+    flags : tuple of Flag
+        What the self-check found (empty: ``ok``).
     method : str
         E.g. ``spsa/jt(alpha=2 histogram)`` or ``simpleitk/mattes(line_search)``.
     seconds : float
@@ -76,31 +68,47 @@ class Registration:
     stop_reason : str
         The finest level's stop reason.
     history : dict of ndarray
-        Per iteration over all levels: ``level`` (k,), ``theta`` (k, 3), ``value`` (k,),
-        ``step`` (k,), ``blocked`` (k,).
-    spacing : (row, col)
-        Pixel spacing of the fixed image (for translations in physical units).
+        Per iteration over all levels: ``level`` (k,), ``theta`` (k, p), ``value``, ``step``, ``blocked``.
+    initial : RigidTransform or None
+        Where the schedule started.
+    overlap : float
+        Fraction of the finest level's fixed samples inside the moving image at the result.
     restarts : int
-        Runs of the schedule after the first (a capture-check retry).
+        Runs of the schedule adopted after the first (a capture-check retry).
+    measures : dict of float
+        What each self-check test measured at the result, flagged or not (``chance``: the measure over its chance
+        level; ``consistency``: the largest relative drop of a coarser level's measure; ``agreement``: the
+        distance to JT's optimum; ``content``, ``prominence``, ``flatness``): the numbers its thresholds compare.
     """
 
     transform: RigidTransform
     value: float
-    ok: bool
-    reason: str
+    flags: tuple[Flag, ...]
     method: str
     seconds: float
     iterations: int
     evaluations: int
     stop_reason: str
     history: dict[str, np.ndarray] = field(default_factory=dict)
-    spacing: tuple[float, float] = (1.0, 1.0)
+    initial: RigidTransform | None = None
+    overlap: float = math.nan
     restarts: int = 0
+    measures: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return not self.flags
+
+    @property
+    def reason(self) -> str:
+        return "; ".join(f.message for f in self.flags)
 
     def summary(self) -> dict:
-        return {"tx": self.transform.tx, "ty": self.transform.ty, "angle": self.transform.angle,
-                "objective": self.value, "ok": self.ok, "reason": self.reason, "method": self.method,
-                "iterations": self.iterations, "evaluations": self.evaluations, "restarts": self.restarts,
+        t = self.transform
+        values = dict(zip(t.names, (*t.angles_deg, *map(float, t.translation))))
+        return {**values, "objective": self.value, "ok": self.ok, "reason": self.reason,
+                "flags": ",".join(f.check for f in self.flags), "method": self.method, "iterations": self.iterations,
+                "evaluations": self.evaluations, "restarts": self.restarts, "overlap": self.overlap,
                 "stop": self.stop_reason, "seconds": self.seconds}
 
 
@@ -114,294 +122,584 @@ class RegisterResult(StageResult):
         return self.registration.summary()
 
 
-def initial_translation(fixed: Image, moving: Image, mode: str, angle: float = 0.0) -> np.ndarray:
-    """Translation t such that ``T(x) = R(angle)(x - c) + c + t`` maps the fixed reference point
-    (intensity centroid for ``'moments'``, image centre for ``'geometry'``) onto the moving one."""
-    c = np.asarray(fixed.center)
-    if mode == "moments":
-        pf, pm = intensity_centroid(fixed), intensity_centroid(moving)
-    elif mode == "geometry":
-        pf, pm = c, np.asarray(moving.center)
-    else:
+def initial_translation(fixed: Image, moving: Image, mode: str, angles=None) -> np.ndarray:
+    """Translation t such that ``T(p) = R(angles)(p - c) + c + t`` maps the fixed reference point (intensity
+    centroid for ``'moments'``, grid centre for ``'geometry'``) onto the moving one; c the fixed centre."""
+    if mode not in ("moments", "geometry"):
         raise ValueError(f"init must be 'moments' or 'geometry', got {mode!r}")
-    return pm - c - rotation_matrix(angle) @ (pf - c)
+    pf, pm = (_centroid(fixed), _centroid(moving)) if mode == "moments" else (fixed.center, moving.center)
+    angles = np.zeros(n_angles(fixed.dim)) if angles is None else angles
+    c = fixed.center
+    return pm - c - euler_matrix(angles) @ (pf - c)
+
+
+def _centroid(image: Image) -> np.ndarray:
+    """The image's intensity centroid, computed once per image object (the start search asks for it often)."""
+    cached = image.__dict__.get("_centroid")
+    if cached is None:
+        cached = image.centroid()
+        object.__setattr__(image, "_centroid", cached)
+    return cached
+
+
+def sample_mask(fixed: Image, params: RegisterParams) -> np.ndarray | None:
+    """The fixed pixels the histograms sample (None: all): the Otsu foreground grown by ``sampling.margin``
+    (:func:`~topomatch.stages.registration.image.grow`)."""
+    if params.sampling.region == "all":
+        return None
+    return grow(foreground_mask(fixed), params.sampling.margin, fixed.spacing)
+
+
+@dataclass(frozen=True)
+class _Level:
+    spec: LevelSpec
+    objective: Objective
+    spacing: float
+    images: tuple  # (fixed, moving, mask) on the level's grid: another sample of them for the stability test
+
+
+class _Run:
+    """One registration in progress: the pyramid, scaling, bounds, random stream, history and level ends."""
+
+    def __init__(self, fixed: Image, moving: Image, params: RegisterParams, mask: np.ndarray | None, callback):
+        self.params, self.callback = params, callback
+        self.fixed, self.moving, self.dim = fixed, moving, fixed.dim
+        self.k = n_angles(fixed.dim)
+        self.center = fixed.center
+        self.mask = mask
+        self.levels = self._pyramid()
+        self.radius = rms_radius(fixed, mask)
+        self.scales = np.r_[[1.0 / self.radius] * self.k, [1.0] * self.dim]
+        self.rng = np.random.default_rng(params.seed)
+        self.start = self.start_search(initial_translation(fixed, moving, params.transform.init))
+        b = params.bounds
+        extent = np.asarray(fixed.size) * np.asarray(fixed.spacing)
+        self.max_translation = b.max_translation if b.max_translation is not None else 0.5 * float(extent.min())
+        a = math.radians(b.max_angle)
+        self.lower = np.r_[[-a] * self.k, self.start[self.k:] - self.max_translation]
+        self.upper = np.r_[[a] * self.k, self.start[self.k:] + self.max_translation]
+        self.history: list[dict[str, np.ndarray]] = []
+        self.ends: list[np.ndarray] = []
+        self._grid: GridSearch | None = None
+
+    def _pyramid(self) -> list[_Level]:
+        """One measure per schedule level, coarse to fine (module docstring, point 2)."""
+        p, m = self.params, self.params.metric
+        mask_image = None if self.mask is None else self.fixed.with_data(self.mask.astype(np.float64))
+
+        def build(i: int, spec: LevelSpec, grid: LevelSpec, sigma: float) -> _Level:
+            F, M = (self.fixed.smoothed(sigma), self.moving.smoothed(sigma)) if sigma > 0 else (self.fixed, self.moving)
+            F, M = F.shrink_to(grid.spacing, MIN_LEVEL_VOXELS), M.shrink_to(grid.spacing, MIN_LEVEL_VOXELS)
+            mask = None if mask_image is None else mask_image.shrink_to(grid.spacing, MIN_LEVEL_VOXELS).data >= 0.5
+            mask = mask if mask is not None and mask.any() else None
+            power = p.coarse_overlap_power if i < len(p.schedule) - 1 else 0.0
+            objective = Objective(self.histogram(spec, (F, M, mask), grid.samples, p.seed + i), m.name, alpha=m.alpha,
+                                  weights=m.weights, tmi_form=m.tmi_form, min_overlap=m.min_overlap,
+                                  overlap_power=power)
+            return _Level(spec, objective, float(np.mean(F.spacing)), (F, M, mask))
+
+        levels = [build(i, spec, spec, 0.0) for i, spec in enumerate(p.schedule)]
+        enough = next((i for i, lv in enumerate(levels) if lv.objective.histogram.n_samples >= MIN_LEVEL_SAMPLES),
+                      len(levels) - 1)
+        for i in range(enough):
+            levels[i] = build(i, p.schedule[i], p.schedule[enough], SMALL_FOV_SIGMA * p.schedule[i].spacing)
+        return levels
+
+    def histogram(self, spec: LevelSpec, images: tuple, samples: int | None, seed: int) -> JointHistogram:
+        """The joint histogram of a level's images (fixed, moving, mask), binned over the full images' ranges."""
+        F, M, mask = images
+        return JointHistogram(F, M, Binning.of(self.fixed.data, spec.bins), Binning.of(self.moving.data, spec.bins),
+                              center=self.center, mode=spec.interpolation, samples=samples, mask=mask,
+                              jitter=self.params.sampling.jitter, seed=seed)
+
+    def start_search(self, t_init: np.ndarray) -> np.ndarray:
+        """The start: ``transform.init``'s translation, or with ``start.steps`` the best of a grid of
+        ``(2 steps + 1)^d`` shifts of ``start.spacing`` about it, the other centre-mapping translation and the
+        identity (the files' own placement), scored at the coarsest level; each centre and the
+        ``start.candidates`` best shifts are then optimised ``start.iterations`` coarsest-level iterations and
+        the highest end is the start (a cropped or re-contrasted moving image moves its centroid)."""
+        st, zeros = self.params.start, np.zeros(self.k)
+        theta0 = np.r_[zeros, t_init]
+        if st.steps == 0:
+            return theta0
+        coarse = self.levels[0].objective
+        offsets = np.arange(-st.steps, st.steps + 1) * st.spacing
+        grid = np.stack(np.meshgrid(*[offsets] * self.dim, indexing="ij"), axis=-1).reshape(-1, self.dim)
+        centres = [t_init] + [initial_translation(self.fixed, self.moving, m) for m in ("moments", "geometry")]
+        centres.append(np.zeros(self.dim))
+        scored = [(coarse(theta0), 0, theta0)]
+        for c in centres:
+            for off in grid:
+                theta = np.r_[zeros, c + off]
+                scored.append((coarse(theta), len(scored), theta))
+        scored = sorted((x for x in scored if math.isfinite(x[0])), key=lambda x: (-x[0], x[1]))
+        if not scored:
+            return theta0
+        chosen: list[np.ndarray] = []
+        for theta in [np.r_[zeros, c] for c in centres] + [x[2] for x in scored]:
+            if len(chosen) >= len(centres) + st.candidates:
+                break
+            if math.isfinite(coarse(theta)) and all(np.linalg.norm(theta[self.k:] - other[self.k:]) >= 0.5 * st.spacing
+                                                    for other in chosen):
+                chosen.append(theta)
+        if not chosen:
+            return scored[0][2]
+        if st.iterations == 0 or len(chosen) == 1:
+            return chosen[0]
+        spec = self.levels[0].spec.model_copy(update={"iterations": st.iterations})
+        box = np.r_[[math.radians(self.params.bounds.max_angle)] * self.k, [np.inf] * self.dim]
+        ends = [self.optimize(0, spec, theta, lower=-box, upper=box).theta for theta in chosen]
+        values = [coarse(e) for e in ends]
+        best = int(np.argmax([v if math.isfinite(v) else -math.inf for v in values]))
+        return ends[best] if math.isfinite(values[best]) else chosen[0]
+
+    def optimize(self, li: int, spec: LevelSpec, theta: np.ndarray, *, lower, upper, callback=None, start: int = 0,
+                 objective: Objective | None = None) -> OptimizeResult:
+        """The chosen optimiser on level ``li``'s objective (or ``objective``) from ``theta`` (SPSA's gains
+        continued from iteration ``start``)."""
+        o = self.params.optimizer
+        objective = self.levels[li].objective if objective is None else objective
+        if o.name == "spsa":
+            settings = SPSASettings(
+                iterations=spec.iterations, a=o.a, A=o.A, c=spec.c, alpha=spec.gain_alpha, gamma=o.gain_gamma,
+                step=spec.step, average=spec.average, max_step=o.max_step, blocking=o.blocking, shrink=o.shrink,
+                tol=o.tol, average_last=min(o.average_last, spec.iterations), newton=o.newton, normalize=o.normalize,
+                c_step_ratio=o.c_step_ratio, start=start)
+            return spsa_maximize(objective, theta, settings, rng=self.rng, scales=self.scales, lower=lower,
+                                 upper=upper, callback=callback)
+        settings = PowellSettings(max_evaluations=max(20, 4 * spec.iterations), xtol=0.02 * self.levels[li].spacing,
+                                  step=spec.step)
+        return powell_maximize(objective, theta, settings, scales=self.scales, lower=lower, upper=upper,
+                               callback=callback)
+
+    def schedule_from(self, theta: np.ndarray, done: int = 0) -> tuple[np.ndarray, str]:
+        """Optimise level by level from ``theta`` (the first level continuing its gains after ``done``
+        iterations already made from a refined probe); record each level's history and end."""
+        stop, self.ends = "", []
+        for li, level in enumerate(self.levels):
+            cb = None if self.callback is None else (lambda k, th, v, li=li: self.callback(li, k, th, v))
+            spec, start = level.spec, 0
+            if li == 0 and done > 0:
+                start = min(done, spec.iterations - 1)
+                spec = spec.model_copy(update={"iterations": spec.iterations - start})
+            for _ in range(1 + spec.reruns):
+                res = self.optimize(li, spec, theta, lower=self.lower, upper=self.upper, callback=cb, start=start)
+                if level.objective(res.theta) >= level.objective(theta):
+                    theta = res.theta
+                stop = res.stop_reason
+                self.history.append({"level": np.full(res.iterations, li), **res.history})
+                if not self.still_moving(res.history["theta"], spec.settle):
+                    break
+            self.ends.append(np.asarray(theta, dtype=np.float64))
+        return np.asarray(theta, dtype=np.float64), stop
+
+    def still_moving(self, path: np.ndarray, settle: float) -> bool:
+        """Whether the last half of the iterates ``path`` (k, p) moved the estimate by more than ``settle``: the
+        level's decaying steps ran out before it converged."""
+        return settle > 0 and len(path) >= 4 and self.distance(path[-1], path[len(path) // 2]) > settle
+
+    def distance(self, a: np.ndarray, b: np.ndarray) -> float:
+        """Approximate RMS displacement between two transforms: the translation and each angle's arc at the RMS
+        radius (angles wrapped)."""
+        da = (np.asarray(a[: self.k]) - np.asarray(b[: self.k]) + math.pi) % (2 * math.pi) - math.pi
+        return float(math.hypot(np.linalg.norm(np.asarray(a[self.k:]) - np.asarray(b[self.k:])),
+                                np.linalg.norm(da) * self.radius))
+
+    def refine(self, start: np.ndarray, objective: Objective | None = None) -> tuple[np.ndarray, float]:
+        """``check.refine`` iterations of the first level (or of ``objective`` there) from ``start``, any angle."""
+        objective = self.levels[0].objective if objective is None else objective
+        spec = self.levels[0].spec.model_copy(update={"iterations": max(1, self.params.check.refine)})
+        lower, upper = np.r_[[-np.inf] * self.k, self.lower[self.k:]], np.r_[[np.inf] * self.k, self.upper[self.k:]]
+        res = self.optimize(0, spec, start, lower=lower, upper=upper, objective=objective)
+        return res.theta, objective(res.theta)
+
+    def search_images(self, content: bool = False) -> SearchImages:
+        """The images at the coarse search's resolution (``content``: scaled to the fixed content's extent)."""
+        key = "_search_content" if content else "_search"
+        if not hasattr(self, key):
+            spacing = None
+            if content:
+                fg = np.argwhere(foreground_mask(self.fixed))
+                extent = (fg.max(axis=0) - fg.min(axis=0) + 1)[::-1] * np.asarray(self.fixed.spacing)
+                spacing = max(search_spacing([self.fixed, self.moving]) / 4, float(extent.min()) / 24)
+            setattr(self, key, SearchImages(self.fixed, self.moving, center=self.center,
+                                            min_overlap=self.params.metric.min_overlap, spacing=spacing))
+        return getattr(self, key)
+
+    def grid(self) -> GridSearch:
+        """The coarse exhaustive search (once): 2D ``check.probes`` angles over the full circle, 3D no rotation and
+        ``check.angles`` about each axis; x a ``check.grid``^d square of translations over the search box about
+        the centroid-mapping translation of each rotation."""
+        if self._grid is None:
+            c = self.params.check
+            if self.dim == 2:
+                rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
+                quarter = math.pi / c.probes / 2
+                polish = [np.array([-quarter]), np.array([0.0]), np.array([quarter])]
+            else:
+                rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
+                                                       for a in c.angles])
+                polish = [np.zeros(3)]
+            self._grid = grid_search(
+                self.search_images(), rotations,
+                lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
+                steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
+        return self._grid
+
+    def candidates(self, theta: np.ndarray) -> list[np.ndarray]:
+        """The ``check.candidates`` best grid transforms away from the result, at least a grid cell apart."""
+        grid, chosen = self.grid(), []
+        for i in np.argsort(-grid.values, kind="stable"):
+            if not math.isfinite(grid.values[i]) or len(chosen) == self.params.check.candidates:
+                break
+            if all(self.distance(grid.thetas[i], other) >= grid.spacing for other in [theta, *chosen]):
+                chosen.append(grid.thetas[i])
+        return chosen
+
+
+# --------------------------------------------------------------------------- self-check
+# Each check is ``check(run, theta, value, stop) -> list[Flag]``; the capture check may also leave a better
+# result in ``run.better``.
+
+
+def check_start(run: _Run, theta, value, stop) -> list[Flag]:
+    """The optimiser could not start: no overlap at the start, or nothing to climb."""
+    coarse = run.levels[0].objective
+    if stop in ("invalid_start", "flat_objective") or not math.isfinite(coarse(run.start)):
+        return [Flag("start", f"the optimiser could not start ({stop.replace('_', ' ') or 'no overlap'}): only "
+                              f"{coarse.overlap(run.start):.1%} of the fixed samples overlap the moving image at the "
+                              f"start ({run.params.transform.init}; min_overlap {run.params.metric.min_overlap:.0%}), "
+                              f"or the images carry no information")]
+    return []
+
+
+def check_overlap(run: _Run, theta, value, stop) -> list[Flag]:
+    """The measure is undefined at the result: too little overlap."""
+    if math.isfinite(value):
+        return []
+    return [Flag("overlap", f"only {run.levels[-1].objective.overlap(theta):.1%} of the fixed samples overlap the "
+                            f"moving image at the result (min_overlap {run.params.metric.min_overlap:.0%})")]
+
+
+def check_bounds(run: _Run, theta, value, stop) -> list[Flag]:
+    """Clipped iterates pile up on a bound when the optimum lies beyond it: a result within one unit
+    (translation, or arc at the RMS radius) of a bound."""
+    tol = run.scales
+    at = (theta <= run.lower + tol) | (theta >= run.upper - tol)
+    if not at.any():
+        return []
+    names = [n for n, b in zip(RigidTransform(tuple(theta), tuple(run.center)).names, at) if b]
+    return [Flag("bounds", f"the estimate is on the search bound of {', '.join(names)} (bounds.max_translation / "
+                           f"max_angle): the misalignment is probably outside the capture range")]
+
+
+def check_chance(run: _Run, theta, value, stop) -> list[Flag]:
+    """The measure is near what the same samples give paired at random: no shared structure."""
+    fine = run.levels[-1].objective
+    chance = fine.on(fine.histogram.shuffled(run.params.seed))(theta)
+    if math.isfinite(chance) and chance > 0:
+        run.measures["chance"] = value / chance
+    if run.params.check.chance > 0 and math.isfinite(chance) and chance > 0 and value < run.params.check.chance * chance:
+        return [Flag("chance", f"the measure at the result ({value:.3g}) is only {value / chance:.2f} times its chance "
+                               f"level ({chance:.3g}: the same samples paired at random): the images share no "
+                               f"structure that this measure can align")]
+    return []
+
+
+def check_gain(run: _Run, theta, value, stop) -> list[Flag]:
+    """The result moved from the start but scores no better there."""
+    start_value = run.levels[-1].objective(run.start)
+    if run.distance(theta, run.start) > 0.5 * run.levels[-1].spacing and math.isfinite(start_value) \
+            and not value > start_value:
+        return [Flag("gain", f"the measure at the result ({value:.4g}) is no better than at the start "
+                             f"({start_value:.4g})")]
+    return []
+
+
+def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
+    """A finer level walked away from the basin a coarser one found: at the result, some coarser level's measure
+    is lower than at that level's own end by more than ``check.consistency`` of it (and the two are more than a
+    quarter of that level's spacing apart: a coarse optimum is as good as its pixels)."""
+    threshold = run.params.check.consistency
+    if len(run.ends) != len(run.levels):
+        return []
+    worst = -math.inf
+    for li in range(len(run.levels) - 1):
+        objective, spacing = run.levels[li].objective, run.levels[li].spacing
+        there, here = objective(run.ends[li]), objective(theta)
+        if not (math.isfinite(there) and there > 0 and run.distance(theta, run.ends[li]) > 0.25 * spacing):
+            continue
+        drop = 1.0 - here / there if math.isfinite(here) else 1.0
+        worst = run.measures["consistency"] = max(worst, drop)
+        if threshold > 0 and drop > threshold:
+            return [Flag("consistency", f"the finer levels left the basin that the {spacing:g}-unit level found "
+                                        f"({run.distance(theta, run.ends[li]):.1f} units away, where that level's "
+                                        f"measure is {drop:.0%} lower; consistency {threshold:.0%}): the finest "
+                                        f"measure has no clear optimum at the coarse answer")]
+    return []
+
+
+def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
+    """The chosen measure's optimum is not the thesis's: from the result, the finest level's schedule entry climbs
+    Jensen-Tsallis (alpha 2, histogram weights) on the same samples, and ends more than ``check.agreement`` away
+    (a measure with a biased optimum: Tsallis MI on multimodal pairs). Nothing to compare for JT itself."""
+    m, limit = run.params.metric, run.params.check.agreement
+    if limit <= 0 or (m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"):
+        return []
+    finest = run.levels[-1]
+    jt = Objective(finest.objective.histogram, "jt", alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
+    lower, upper = run.lower, run.upper
+    end = run.optimize(len(run.levels) - 1, finest.spec, theta, lower=lower, upper=upper, objective=jt).theta
+    run.measures["agreement"] = run.distance(end, theta) if jt(end) > jt(theta) else 0.0
+    if run.measures["agreement"] <= limit:
+        return []
+    return [Flag("agreement", f"the optimum of Jensen-Tsallis (alpha 2, the thesis's measure) is "
+                              f"{run.distance(end, theta):.2f} units from the result of {m.label()} (agreement "
+                              f"{limit:g}): this measure's optimum is biased on these images")]
+
+
+def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
+    """The result is not pinned down to ``check.stability``: the finest level run again from it on another sample
+    of the same images (another subset, another jitter) ends farther away (a broad or flat optimum: a silhouette
+    whose outline hardly constrains the rotation, an undetermined direction)."""
+    limit = run.params.check.stability
+    if limit <= 0:
+        return []
+    li, fine = len(run.levels) - 1, run.levels[-1]
+    other = fine.objective.on(run.histogram(fine.spec, fine.images, fine.spec.samples, run.params.seed + 7919))
+    end = run.optimize(li, fine.spec, theta, lower=run.lower, upper=run.upper, objective=other).theta
+    shift = run.measures["stability"] = run.distance(end, theta)
+    if shift <= limit:
+        return []
+    return [Flag("stability", f"the finest level run again from the result on another sample of the images ends "
+                              f"{shift:.2f} units away (stability {limit:g}): the images do not pin the transform "
+                              f"down to that precision")]
+
+
+def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
+    """From the result, or from the best transform of a coarse search that accepts half the overlap, the first
+    level's measure with half the ``min_overlap`` climbs elsewhere, higher and with less overlap than
+    ``min_overlap``: the images match best where they overlap less than accepted (a moving image shifted out of
+    view), and the result is the best transform on the bound, not the answer."""
+    if not run.params.check.overlap_bound:
+        return []
+    coarse, m = run.levels[0].objective, run.params.metric.min_overlap
+    relaxed = coarse.on(coarse.histogram, min_overlap=0.5 * m)
+    here = relaxed(theta)
+    grid = run.grid()  # its best transform when the smaller overlap is accepted, if it needs it
+    starts = [theta] + [t for t in grid.thetas[np.argsort(-grid.values_at(0.5 * m))[:1]] if coarse.overlap(t) < m]
+    for start in starts:
+        end, there = run.refine(start, relaxed)
+        overlap = coarse.overlap(end)
+        if overlap < m and math.isfinite(here) and there > here + run.params.check.margin * abs(here) \
+                and run.distance(end, theta) >= 2.0 * run.levels[0].spacing:
+            return [Flag("overlap_bound", f"the measure keeps rising where the images overlap less than min_overlap "
+                                          f"({m:.0%}): it climbs to {describe(RigidTransform(tuple(end), tuple(run.center)))}"
+                                          f", {overlap:.1%} overlap; the true alignment probably lies outside the "
+                                          f"accepted overlap")]
+    return []
+
+
+def check_content(run: _Run, theta, value, stop) -> list[Flag]:
+    """Too little of the fixed image's content lands on the moving image's content."""
+    if not run.params.check.search:
+        return []
+    content = run.measures["content"] = run.search_images().content_overlap(theta)
+    if content < run.params.check.min_content:
+        return [Flag("content", f"only {content:.1%} of the fixed image's content (Otsu foreground) lands on the "
+                                f"moving image's content at the result (min_content "
+                                f"{run.params.check.min_content:.0%}): too little shared content to trust it")]
+    return []
+
+
+def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
+    """Either image's only structure is its outline (a mask, a silhouette): the result rests on the outline alone."""
+    threshold = run.params.check.min_structure
+    if threshold <= 0:
+        return []
+    flags = []
+    for role, image in (("fixed", run.fixed), ("moving", run.moving)):
+        structure = interior_structure(image)  # NaN: no interior or no outline to compare (not flagged)
+        if math.isfinite(structure):
+            run.measures[f"structure_{role}"] = structure
+        if structure < threshold:
+            flags.append(Flag("outline", f"the {role} image has almost no structure inside its outline (interior "
+                                         f"gradient {structure:.3f} of the outline's; min_structure {threshold:g}): a "
+                                         f"mask or silhouette, which fixes the transform only as well as its outline "
+                                         f"matches the other image's, often not to a pixel; check the overlay, or set "
+                                         f"check.min_structure 0 to accept such pairs"))
+    return flags
+
+
+def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
+    """The result does not stand out of the coarse search's landscape."""
+    if not run.params.check.search:
+        return []
+    prominence = run.measures["prominence"] = run.grid().prominence(run.search_images().score(theta, min_overlap=0.0))
+    if prominence < run.params.check.min_prominence:
+        return [Flag("prominence", f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
+                                   f"deviations above a typical transform of a coarse search (min_prominence "
+                                   f"{run.params.check.min_prominence:g}); the images may share too little content")]
+    return []
+
+
+def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
+    """Some combination of the parameters is undetermined (:func:`~topomatch.stages.registration.search.flatness`
+    on a copy of the images scaled to the fixed content, 6 of its pixels from the result, angles as arcs at the
+    content's RMS radius)."""
+    threshold = run.params.check.min_flatness
+    if threshold <= 0:
+        return []
+    images = run.search_images(content=True)
+    radius = rms_radius(run.fixed, foreground_mask(run.fixed))
+    ratio, u = flatness(lambda t: images.score(t, min_overlap=0.0), theta, dim=run.dim, reach=6.0 * images.spacing,
+                        radius=radius)
+    run.measures["flatness"] = ratio
+    if ratio >= threshold:
+        return []
+    u = u * np.sign(u[np.abs(u).argmax()])
+    parts = [f"{math.degrees(a / radius):+.2f} deg" for a in u[: run.k]] + [f"{v:+.2f} {n}" for v, n in
+                                                                           zip(u[run.k:], ("tx", "ty", "tz"))]
+    return [Flag("flatness", f"the measure hardly changes along ({', '.join(parts)}) per unit from the result (it "
+                             f"falls {ratio:.0%} as much as in the steepest direction; min_flatness {threshold:.0%}): "
+                             f"the images do not determine that combination of the parameters (a straight edge, "
+                             f"stripes, a disc?)")]
+
+
+def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
+    """Another basin is better: the ``check.candidates`` best grid transforms away from the result are refined at
+    the first level; one that beats the result there by ``check.margin`` runs through the whole schedule, and if it
+    ends higher at full resolution the result is flagged (and ``run.better`` holds that end)."""
+    c, levels = run.params.check, run.levels
+    if not c.search:
+        return []
+    coarse, fine = levels[0].objective, levels[-1].objective
+    here = coarse(theta)
+    best_value, best = -math.inf, None
+    for probe in run.candidates(theta):
+        v = coarse(probe)
+        if c.refine > 0 and math.isfinite(v):
+            probe, v = run.refine(probe)
+            if run.distance(probe, theta) < 2.0 * levels[0].spacing:
+                continue  # back in the result's basin
+        if v > best_value:
+            best_value, best = v, probe
+    # a result the coarsest level cannot score loses to any probe it can (-inf + margin * inf would be nan)
+    if not math.isfinite(best_value) or (math.isfinite(here) and best_value <= here + c.margin * abs(here)):
+        return []
+    if np.all(best >= run.lower) and np.all(best <= run.upper):
+        saved = run.ends
+        end, end_stop = run.schedule_from(best, done=c.refine)
+        better_ends, run.ends = run.ends, saved
+        confirmed = fine(end) > value and run.distance(end, theta) >= 2.0 * levels[0].spacing
+        run.better = (end, end_stop, better_ends) if confirmed else None
+        where = f"and ends at {describe(RigidTransform(tuple(end), tuple(run.center)))}, higher at full resolution"
+    else:
+        confirmed = fine(best) > value
+        where = "outside the search bounds (max_translation / max_angle)"
+    if not confirmed:
+        return []
+    start = RigidTransform(tuple(best), tuple(run.center))
+    return [Flag("capture", f"a start at {describe(start)} reaches a higher value than the result ({best_value:.4g} > "
+                            f"{here:.4g} at the {levels[0].spacing:g}-unit level) {where}: the registration stopped in "
+                            f"a local optimum; the misalignment is probably outside the capture range")]
+
+
+CHECKS: tuple[Callable[..., list[Flag]], ...] = (check_start, check_overlap, check_bounds, check_chance, check_gain,
+                                                  check_consistency, check_stability, check_agreement,
+                                                  check_overlap_bound,
+                                                  check_content, check_outline, check_prominence, check_flatness, check_capture)
+"""The self-check, in order; after ``check_overlap`` flags an undefined measure nothing else is asked."""
+
+
+def describe(t: RigidTransform) -> str:
+    """``(angle +10.0 deg, 13.1, 15.9)``-style text of a transform's parameters."""
+    angles = " ".join(f"{a:+.1f}" for a in t.angles_deg)
+    return f"(angle{'s' if t.dim == 3 else ''} {angles} deg, t = {', '.join(f'{v:.1f}' for v in t.translation)})"
+
+
+def self_check(run: _Run, theta: np.ndarray, value: float, stop: str) -> list[Flag]:
+    """The flags of every test of :data:`CHECKS` at the result; ``run.better`` is the capture test's better end."""
+    run.better, run.measures = None, {}
+    flags: list[Flag] = []
+    for check in CHECKS:
+        flags += check(run, theta, value, stop)
+        if flags and flags[-1].check == "overlap":
+            break
+    return flags
 
 
 def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParams(), *,
+             fixed_mask: np.ndarray | None = None,
              callback: Callable[[int, int, np.ndarray, float], bool | None] | None = None) -> Registration:
-    """Register ``moving`` to ``fixed`` (rigid, 2D): the transform T with ``moving(T(x)) ~ fixed(x)``.
+    """Register ``moving`` to ``fixed`` (rigid, 2D or 3D): T with ``moving(T(p)) ~ fixed(p)``.
 
     Parameters
     ----------
     fixed, moving : Image
-        2D images (any sizes).
+        Both 2D or both 3D (any sizes, spacings and orientations).
     params : RegisterParams
+        Fields not set take the dimension's defaults (:func:`~topomatch.stages.registration.params.for_dimension`).
+    fixed_mask : ndarray of bool, shape of ``fixed.data``, optional
+        Fixed pixels to sample (instead of ``params.sampling``).
     callback : callable, optional
         ``callback(level, k, theta, value)`` after every optimiser iteration; True stops the level.
 
     Returns
     -------
     Registration
-        With ``ok=False`` and a ``reason`` when the self-check fails (``check.on_failure='flag'``).
+        With flags and a ``reason`` when the self-check fails (``check.on_failure='flag'``).
 
     Raises
     ------
     StageError
-        A failed self-check with ``check.on_failure='error'``.
+        Images of different dimensionality, a mask that selects nothing or has another shape, or a failed
+        self-check with ``check.on_failure='error'``.
     """
     t0 = time.perf_counter()
-    run = _Run(fixed, moving, params, callback)
-    theta, _, stop = run.schedule_from(run.start)
-    value = run.levels[-1].objective(theta)
-    problems, better = run.self_check(theta, value, stop)
+    if fixed.dim != moving.dim:
+        raise StageError(f"cannot register a {moving.dim}D moving image to a {fixed.dim}D fixed image")
+    params = for_dimension(params, fixed.dim)
+    if fixed_mask is not None:
+        fixed_mask = np.asarray(fixed_mask, dtype=bool)
+        if fixed_mask.shape != fixed.shape or not fixed_mask.any():
+            raise StageError(f"the fixed mask (shape {fixed_mask.shape}, {int(fixed_mask.sum())} pixels) must select "
+                             f"pixels of the fixed image (shape {fixed.shape})")
+    run = _Run(fixed, moving, params, fixed_mask if fixed_mask is not None else sample_mask(fixed, params), callback)
+    theta, stop = run.schedule_from(run.start)
+    fine = run.levels[-1].objective
+    value = fine(theta)
+    flags = self_check(run, theta, value, stop)
     restarts = 0
-    if better is not None and params.check.retry:
-        # the capture check found a better basin and ran the schedule from it: adopt that result
+    if run.better is not None and params.check.retry:
         restarts = 1
-        theta, stop = better
-        value = run.levels[-1].objective(theta)
-        problems, _ = run.self_check(theta, value, stop)
-    total_iter = sum(len(h["level"]) for h in run.history)
-    transform = RigidTransform.from_params(theta, fixed.center)
-    ok, reason = not problems, "; ".join(problems)
-    history = {key: np.concatenate([h[key] for h in run.history]) for key in ("level", "theta", "value", "step",
-                                                                               "blocked")}
-    evaluations = sum(lv.objective.n_evals for lv in run.levels)
-    reg = Registration(transform, float(value), ok, reason, params.method(), time.perf_counter() - t0, total_iter,
-                       evaluations, stop, history, fixed.spacing, restarts)
-    if not ok and params.check.on_failure == "error":
-        raise StageError(f"registration failed: {reason} (estimate tx={transform.tx:.3f}, ty={transform.ty:.3f}, "
-                         f"angle={transform.angle:.3f})")
+        theta, stop, run.ends = run.better
+        value = fine(theta)
+        flags = self_check(run, theta, value, stop)
+    keys = ("level", "theta", "value", "step", "blocked")
+    history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
+    transform = RigidTransform(tuple(theta), tuple(run.center))
+    reg = Registration(transform, float(value), tuple(flags), params.method(), time.perf_counter() - t0,
+                       int(len(history["level"])), sum({id(lv.objective): lv.objective.n_evals
+                                                         for lv in run.levels}.values()), stop, history,
+                       RigidTransform(tuple(run.start), tuple(run.center)), fine.overlap(theta), restarts,
+                       dict(run.measures))
+    if flags and params.check.on_failure == "error":
+        raise StageError(f"registration failed: {reg.reason} (estimate {describe(transform)})")
     return reg
 
 
-MIN_LEVEL_SIDE = 16
-"""Smallest side (pixels) of a pyramid level; coarser levels of the schedule are skipped."""
+register_volumes = register
+"""The name of the 3D registration before 2D and 3D shared one (kept for a release)."""
 
 
-class _Run:
-    """One registration in progress: the pyramid, the parameter scaling, the bounds, the random
-    stream and the history, shared by the schedule, the capture-check refinements and the self-check."""
-
-    def __init__(self, fixed: Image, moving: Image, params: RegisterParams,
-                 callback: Callable[[int, int, np.ndarray, float], bool | None] | None):
-        self.fixed, self.moving, self.params, self.callback = fixed, moving, params, callback
-        smallest = min(min(fixed.shape), min(moving.shape))
-        # levels too coarse for a small image are skipped: below MIN_LEVEL_SIDE pixels a side the
-        # histogram holds too few samples for a gradient estimate and SPSA random-walks
-        kept = [lv for lv in params.schedule if smallest // lv.factor >= MIN_LEVEL_SIDE]
-        skipped = params.schedule[: len(params.schedule) - max(1, len(kept))]  # the coarsest levels
-        if not kept:
-            kept = [params.schedule[-1].model_copy(update={"factor": 1})]
-        if skipped:  # the first kept level also does the skipped levels' work: it wins the capture range now
-            extra = sum(lv.iterations for lv in skipped)
-            kept[0] = kept[0].model_copy(update={"iterations": kept[0].iterations + extra})
-        self.schedule = kept
-        m = params.metric
-        self.levels: list[Level] = build_pyramid(
-            fixed, moving, factors=[lv.factor for lv in self.schedule], bins=[lv.bins for lv in self.schedule],
-            metric=m.name, alpha=m.alpha, weights=m.weights, tmi_form=m.tmi_form,
-            interpolation=[lv.interpolation for lv in self.schedule], samples=[lv.samples for lv in self.schedule],
-            min_overlap=m.min_overlap, seed=params.seed)
-        self.scales = np.array([1.0, 1.0, math.degrees(1.0 / rms_radius(fixed.shape))])  # one angle unit ~ 1 px
-        t_init = initial_translation(fixed, moving, params.transform.init)
-        self.start = np.array([t_init[0], t_init[1], 0.0])
-        b = params.bounds
-        max_t = self.max_translation = (b.max_translation if b.max_translation is not None
-                                         else 0.5 * min(fixed.shape))
-        self.lower = np.array([t_init[0] - max_t, t_init[1] - max_t, -b.max_angle])
-        self.upper = np.array([t_init[0] + max_t, t_init[1] + max_t, b.max_angle])
-        self.rng = np.random.default_rng(params.seed)
-        self.radius = rms_radius(fixed.shape)
-        self._grid: GridSearch | None = None
-        self.history: list[dict[str, np.ndarray]] = []
-
-    def optimize(self, li: int, spec: LevelSpec, theta: np.ndarray, *, lower: np.ndarray, upper: np.ndarray,
-                 callback=None, start: int = 0, objective: Objective | None = None) -> OptimizeResult:
-        """Run the chosen optimiser on level ``li``'s objective (or ``objective`` at that level) from ``theta``
-        (SPSA gains from iteration ``start``)."""
-        level, o = self.levels[li], self.params.optimizer
-        objective = level.objective if objective is None else objective
-        f = level.factor
-        if o.name == "spsa":
-            settings = SPSASettings(
-                iterations=spec.iterations, a=o.a, A=o.A, c=spec.c * f, alpha=spec.gain_alpha, gamma=o.gain_gamma,
-                step=spec.step * f, average=spec.average, max_step=None if o.max_step is None else o.max_step * f,
-                blocking=o.blocking, shrink=o.shrink, tol=o.tol * f,
-                average_last=min(o.average_last, spec.iterations), newton=o.newton, normalize=o.normalize,
-                c_step_ratio=o.c_step_ratio, start=start)
-            return spsa_maximize(objective, theta, settings, rng=self.rng, scales=self.scales, lower=lower,
-                                 upper=upper, callback=callback)
-        settings = PowellSettings(max_evaluations=max(20, 4 * spec.iterations), xtol=0.02 * f, step=spec.step * f)
-        return powell_maximize(objective, theta, settings, scales=self.scales, lower=lower, upper=upper,
-                               callback=callback)
-
-    def schedule_from(self, theta: np.ndarray, done: int = 0) -> tuple[np.ndarray, int, str]:
-        """Optimise level by level from ``theta``; append each level's history.
-
-        ``done`` first-level iterations were already made (a refined probe): the first level continues
-        its gain sequence from there for the rest of its iterations.
-        """
-        total_iter, stop = 0, ""
-        for li, spec in enumerate(self.schedule):
-            cb = None if self.callback is None else (lambda k, th, v, li=li: self.callback(li, k, th, v))
-            start = 0
-            if li == 0 and done > 0:
-                start = min(done, spec.iterations - 1)
-                spec = spec.model_copy(update={"iterations": spec.iterations - start})
-            res = self.optimize(li, spec, theta, lower=self.lower, upper=self.upper, callback=cb, start=start)
-            # a level never ends worse than it started (ITK's ReturnBestParametersAndValue, for the end points)
-            if self.levels[li].objective(res.theta) >= self.levels[li].objective(theta):
-                theta = res.theta
-            total_iter += res.iterations
-            stop = res.stop_reason
-            self.history.append({"level": np.full(res.iterations, li), **res.history})
-        return theta, total_iter, stop
-
-    def refine(self, start: np.ndarray, objective: Objective | None = None) -> tuple[np.ndarray, float]:
-        """A short run of the first level (or of ``objective`` there) from ``start``, any angle: the end and its value."""
-        objective = self.levels[0].objective if objective is None else objective
-        spec = self.schedule[0].model_copy(update={"iterations": self.params.check.refine})
-        res = self.optimize(0, spec, start, lower=np.r_[self.lower[:2], -np.inf], upper=np.r_[self.upper[:2], np.inf],
-                            objective=objective)
-        return res.theta, objective(res.theta)
-
-    def overlap_bound_check(self, theta: np.ndarray) -> list[str]:
-        """Is the result pressed against the overlap bound? From it, the first level's measure with half
-        the ``metric.min_overlap`` is climbed briefly; ending elsewhere, higher and with less overlap
-        than ``min_overlap`` means the true alignment probably overlaps less than accepted (a moving
-        image shifted out of view), and the result is the best transform on the bound, not the answer."""
-        coarse, m = self.levels[0].objective, self.params.metric.min_overlap
-        relaxed = coarse.with_min_overlap(0.5 * m)
-        here = relaxed(theta)
-        end, there = self.refine(theta, relaxed)
-        overlap = coarse.overlap(end)
-        if (overlap < m and math.isfinite(here) and there > here + self.params.check.margin * abs(here)
-                and self.distance(end, theta) >= 2.0 * self.levels[0].factor):
-            return [f"the measure keeps rising where the images overlap less than min_overlap "
-                    f"({m:.0%}): from the result it climbs to ({end[0]:.0f}, {end[1]:.0f}, {end[2]:+.0f} deg), "
-                    f"{overlap:.1%} overlap; the true alignment probably lies outside the accepted overlap"]
-        return []
-
-    def grid(self) -> GridSearch:
-        """The coarse exhaustive search (computed once): ``check.probes`` angles over the full circle x a
-        ``check.grid`` square of translations over the search box about the centroid-mapping translation."""
-        if self._grid is None:
-            self.search_images = SearchImages(self.fixed, self.moving, min_overlap=self.params.metric.min_overlap)
-            self._grid = grid_search(
-                self.search_images, lambda angle: initial_translation(self.fixed, self.moving, "moments", angle),
-                angles=self.params.check.probes, steps=self.params.check.grid, half_width=self.max_translation)
-        return self._grid
-
-    def distance(self, a: np.ndarray, b: np.ndarray) -> float:
-        """RMS pixel displacement between two transforms, approximately: translation and arc at the RMS radius."""
-        arc = math.radians((a[2] - b[2] + 180.0) % 360.0 - 180.0) * self.radius
-        return math.hypot(math.hypot(*(a[:2] - b[:2])), arc)
-
-    def candidates(self, grid: GridSearch, theta: np.ndarray) -> list[np.ndarray]:
-        """The ``check.candidates`` best grid transforms outside the result's cell, one per cell."""
-        chosen: list[np.ndarray] = []
-        for i in np.argsort(-grid.values, kind="stable"):
-            probe = grid.thetas[i]
-            if not math.isfinite(grid.values[i]) or len(chosen) == self.params.check.candidates:
-                break
-            if all(self.distance(probe, other) >= grid.spacing for other in [theta, *chosen]):
-                chosen.append(probe)
-        return chosen
-
-    def flatness_check(self, theta: np.ndarray) -> list[str]:
-        """Is some combination of the parameters undetermined? (:func:`~topomatch.stages.registration.search.flatness`
-        on the coarse search's measure, 2 and 6 search pixels from the result.)"""
-        if self.params.check.min_flatness <= 0:
-            return []
-        self.grid()  # builds the search images (once)
-        f = self.search_images.factor
-        ratio, u = flatness(lambda t: self.search_images.score(t, min_overlap=0.0), theta, step=2.0 * f,
-                            reach=6.0 * f, radius=self.radius)
-        if ratio >= self.params.check.min_flatness:
-            return []
-        u = u * np.sign(u[np.abs(u).argmax()])
-        return [f"the measure hardly changes along ({u[0]:+.2f} tx, {u[1]:+.2f} ty, "
-                f"{math.degrees(u[2] / self.radius):+.2f} deg) per pixel from the result (it falls {ratio:.0%} as "
-                f"much as in the steepest direction; min_flatness {self.params.check.min_flatness:.0%}): the images "
-                f"do not determine that combination of the parameters (a straight edge, stripes, a disc?)"]
-
-    def self_check(self, theta: np.ndarray, value: float,
-                   stop: str) -> tuple[list[str], tuple[np.ndarray, str] | None]:
-        """Reasons to distrust a result (empty list: none), and a better result found by the capture
-        check (its theta and stop reason), or None.
-
-        Checks, in order: the optimiser started; the overlap; the search bounds; and with
-        ``check.capture`` the coarse search (:mod:`~topomatch.stages.registration.search`): the
-        content overlap, the prominence, the flatness (:meth:`flatness_check`), and the ``check.candidates`` best grid transforms away from
-        the result, each refined (:meth:`refine`) and, if one beats the result at the first level,
-        run through the whole schedule to confirm it at full resolution.
-        """
-        params, levels, check = self.params, self.levels, self.params.check
-        problems: list[str] = []
-        winner = None
-        if stop in ("invalid_start", "flat_objective"):
-            problems.append(f"the optimiser could not start ({stop.replace('_', ' ')}): the images do not overlap "
-                            f"enough at the initial transform or carry no information")
-        if not math.isfinite(value):
-            overlap = levels[-1].objective.overlap(theta)
-            problems.append(f"only {overlap:.1%} of the fixed image overlaps the moving image at the result "
-                            f"(min_overlap {params.metric.min_overlap:.0%})")
-            return problems, None
-        # clipped iterates pile up on a bound when the optimum lies beyond it: flag a result within
-        # one pixel (translation, or arc at the RMS radius) of a bound
-        tol = np.array([1.0, 1.0, math.degrees(1.0 / self.radius)])
-        at_bound = (theta <= self.lower + tol) | (theta >= self.upper - tol)
-        if at_bound.any():
-            names = [n for n, b in zip(("tx", "ty", "angle"), at_bound) if b]
-            problems.append(f"the estimate is on the search bound of {', '.join(names)} (max_translation / "
-                            f"max_angle): the misalignment is probably outside the capture range")
-        if check.capture:
-            problems += self.overlap_bound_check(theta)
-            here = levels[0].objective(theta)
-            grid = self.grid()
-            content = self.search_images.content_overlap(theta)
-            if content < check.min_content:
-                problems.append(f"only {content:.1%} of the fixed image's content (Otsu foreground) lands on the "
-                                f"moving image's content at the result (min_content {check.min_content:.0%}): "
-                                f"too little shared content to trust it")
-            prominence = grid.prominence(self.search_images.score(theta, min_overlap=0.0))  # overlap: checked above
-            if prominence < check.min_prominence:
-                problems.append(f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
-                                f"deviations above a typical transform of a coarse search (min_prominence "
-                                f"{check.min_prominence:g}); the images may share too little content to register")
-            problems += self.flatness_check(theta)
-            best_value, best_theta = -math.inf, None
-            for probe in self.candidates(grid, theta):
-                v = levels[0].objective(probe)
-                if check.refine > 0 and math.isfinite(v):
-                    probe, v = self.refine(probe)
-                    # a refined probe that came back to the result (within 2 coarse pixels RMS) is its basin
-                    if self.distance(probe, theta) < 2.0 * levels[0].factor:
-                        continue
-                if v > best_value:
-                    best_value, best_theta = v, probe
-            if math.isfinite(best_value) and (not math.isfinite(here) or best_value > here + check.margin * abs(here)):
-                # a better start at the coarsest level; confirmed only if it also ends higher at full
-                # resolution (coarse levels of small images can prefer a wrong basin)
-                if np.all(best_theta >= self.lower) and np.all(best_theta <= self.upper):
-                    end, _, end_stop = self.schedule_from(best_theta, done=check.refine)
-                    confirmed = (levels[-1].objective(end) > value
-                                 and self.distance(end, theta) >= 2.0 * levels[0].factor)
-                    winner = (end, end_stop) if confirmed else None
-                    where = f"and ends at ({end[0]:.1f}, {end[1]:.1f}, {end[2]:+.1f} deg) higher at full resolution"
-                else:
-                    confirmed = levels[-1].objective(best_theta) > value
-                    where = "outside the search bounds (max_translation / max_angle)"
-                if confirmed:
-                    problems.append(f"a start at ({best_theta[0]:.0f}, {best_theta[1]:.0f}, {best_theta[2]:+.0f} deg) "
-                                    f"reaches a higher value than the result ({best_value:.4g} > {here:.4g} at factor "
-                                    f"{levels[0].factor}) {where}: the registration stopped in a local optimum; "
-                                    f"the misalignment is probably outside the capture range")
-        return problems, winner
-
-
-@stage("register", params=RegisterParams, version=1, consumes=("fixed", "moving"), produces=("registration",))
+@stage("register", params=RegisterParams, version=2, consumes=("fixed", "moving"), produces=("registration",))
 def register_stage(fixed: Image, moving: Image, *, params: RegisterParams) -> RegisterResult:
-    """Rigid registration by an entropic measure (JT, JR, MI, TMI) with SPSA or Powell, coarse to fine."""
+    """Rigid registration (2D or 3D) by an entropic measure (JT, JR, MI, TMI) with SPSA or Powell, coarse to fine."""
+    return RegisterResult(register(fixed, moving, params))
+
+
+@stage("register_3d", params=RegisterParams, version=2, consumes=("fixed", "moving"), produces=("registration",))
+def register_3d_stage(fixed: Image, moving: Image, *, params: RegisterParams) -> RegisterResult:
+    """The ``register`` stage under its 3D name of the previous release (kept for a release)."""
     return RegisterResult(register(fixed, moving, params))

@@ -21,6 +21,9 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import Params, ReportOutput, report
+from topomatch.stages.registration.evaluate import EvaluateResult
+from topomatch.stages.registration.landscape import LandscapeResult
+from topomatch.stages.registration.register import RegisterResult
 
 _NAME = dict(pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure or table")
 
@@ -39,9 +42,9 @@ def _label(r) -> str:
     return "|".join(parts)
 
 
-def _of_type(r, type_name: str) -> list[tuple[str, Any]]:
-    """(stage label, result) of every result of the given class name in an item, in chain order."""
-    return [(label, res) for label, res in r.results.items() if type(res).__name__ == type_name]
+def _of_type(r, cls: type) -> list:
+    """Every result of class ``cls`` in an item, in chain order."""
+    return [res for res in r.results.values() if isinstance(res, cls)]
 
 
 # --------------------------------------------------------------------------- Figs. 2.2-2.3
@@ -124,9 +127,9 @@ def bernoulli_jt_report(experiment, results, params: BernoulliJTParams) -> Repor
 
 class ConditionalParams(Params):
     name: str = Field("fig2_4_conditionals", **_NAME)
-    transforms: list[tuple[float, float, float]] = Field(
-        default_factory=lambda: [(0, 0, 0), (2, 0, 0), (0, 0, 5), (5, 0, -15)], min_length=1,
-        description="(tx, ty, angle) of the moved copies (ITK convention)")
+    transforms: list[list[float]] = Field(
+        default_factory=lambda: [[0, 0, 0], [0, 2, 0], [5, 0, 0], [-15, 5, 0]], min_length=1,
+        description="parameters of the moved copies, SimpleITK's order, angles in degrees (2D: angle, tx, ty)")
     bins: int = Field(32, ge=2, le=256, description="histogram bins")
     alpha: float = Field(2.0, gt=0, description="order of the JT value shown")
     rows_shown: int = Field(6, ge=1, description="conditional distributions drawn as curves")
@@ -139,6 +142,7 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
 
     from topomatch.stages.registration.divergence import conditionals, jensen_tsallis_histogram
     from topomatch.stages.registration.histogram import Binning, JointHistogram
+    from topomatch.stages.registration.transform import RigidTransform, n_angles
 
     figures, table = {}, []
     for r in results:
@@ -146,11 +150,13 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
         if image is None:
             continue
         binning = Binning.of(image.data, params.bins)
-        jh = JointHistogram(image.data, image.data, binning, binning, center=image.center, interpolation="bilinear")
+        jh = JointHistogram(image, image, binning, binning, center=image.center, mode="linear")
         n = len(params.transforms)
         fig, axes = plt.subplots(2, n, figsize=(3.3 * n, 6.2), squeeze=False)
         for k, theta in enumerate(params.transforms):
-            h, _ = jh(np.array(theta, dtype=float))
+            t = RigidTransform(tuple(np.radians(theta[: n_angles(image.dim)])) + tuple(theta[n_angles(image.dim):]),
+                               tuple(image.center))
+            h, _ = jh(np.asarray(t.parameters))
             P, w = conditionals(h)
             jt = jensen_tsallis_histogram(h, params.alpha)
             full = np.zeros_like(h)
@@ -169,7 +175,7 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
             ax.set_ylabel("p_ij")
             ax.set_ylim(0, 1.02)
             ax.set_title(f"{len(top)} most frequent rows", fontsize=8)
-            table.append({"input": _label(r), "tx": theta[0], "ty": theta[1], "angle": theta[2], "jt": jt,
+            table.append({"input": _label(r), **dict(zip(t.names, theta)), "jt": jt,
                           "mean_row_max": float((w * P.max(axis=1)).sum())})
         fig.suptitle(f"{_label(r)}: conditional distributions of the reference bins (rows of the joint histogram); "
                      f"crisp when aligned, dispersed when not (thesis Figs. 2.4-2.5)", fontsize=9)
@@ -194,38 +200,38 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
     for r in results:
         if not r.ok:
             continue
-        for _, ev in _of_type(r, "EvaluateResult"):
-            t = (ev.truth["tx"], ev.truth["ty"], ev.truth["angle"])
-            est = (t[0] + ev.d_tx, t[1] + ev.d_ty, t[2] + ev.d_angle)
-            data.setdefault(_label(r), {}).setdefault(tuple(round(v, 6) for v in t), {})[ev.method] = (t, est, ev)
+        for ev in _of_type(r, EvaluateResult):
+            names = tuple(ev.truth)
+            t = tuple(ev.truth[n] for n in names)
+            est = tuple(ev.truth[n] + ev.errors[n] for n in names)
+            data.setdefault(_label(r), {}).setdefault(tuple(round(v, 6) for v in t), {})[ev.method] = (names, t, est, ev)
     figures, table = {}, []
-    names = ("tx", "ty", "angle")
     for image, cases in data.items():
         cols = len(cases)
         fig, axes = plt.subplots(2, cols, figsize=(4.4 * cols, 6.4), squeeze=False)
         for c, (key, by_method) in enumerate(cases.items()):
             methods = list(by_method)
             width = 0.8 / max(len(methods), 1)
-            x = np.arange(3)
-            truth = next(iter(by_method.values()))[0]
+            names, truth = next(iter(by_method.values()))[:2]
+            x = np.arange(len(names))
             for m, method in enumerate(methods):
-                t, est, ev = by_method[method]
+                _, t, est, ev = by_method[method]
                 errs = [abs(e - v) for e, v in zip(est, t)]
                 label = method.split("/")[-1].split("(")[0].upper()
                 axes[0][c].bar(x + (m - (len(methods) - 1) / 2) * width, est, width, label=label)
                 axes[1][c].bar(x + (m - (len(methods) - 1) / 2) * width, errs, width, label=label)
-                table.append({"input": image, "true_tx": t[0], "true_ty": t[1], "true_angle": t[2], "method": method,
-                              "tx": est[0], "ty": est[1], "angle": est[2], "err_tx": errs[0], "err_ty": errs[1],
-                              "err_angle": errs[2], "tre_mean": ev.tre_mean, "success": ev.success})
-            for j in range(3):
+                table.append({"input": image, **{f"true_{n}": v for n, v in zip(names, t)}, "method": method,
+                              **dict(zip(names, est)), **{f"err_{n}": e for n, e in zip(names, errs)},
+                              "tre_mean": ev.tre_mean, "success": ev.success})
+            for j in range(len(names)):
                 axes[0][c].hlines(truth[j], j - 0.45, j + 0.45, colors="k", linestyles="--", lw=1)
             axes[0][c].set_xticks(x, names)
             axes[1][c].set_xticks(x, [f"|{n} err|" for n in names])
-            axes[0][c].set_title(f"true theta = ({truth[0]:g}, {truth[1]:g}, {truth[2]:g}) (dashed)", fontsize=8)
+            axes[0][c].set_title(f"true ({', '.join(f'{n} {v:g}' for n, v in zip(names, truth))}) (dashed)", fontsize=8)
             axes[1][c].set_yscale("log")
             axes[1][c].set_ylim(1e-4, 100)
             axes[1][c].axhline(1.0, color="0.5", lw=0.6)
-        axes[0][0].set_ylabel("recovered (px, px, deg)")
+        axes[0][0].set_ylabel("recovered (deg, px)")
         axes[1][0].set_ylabel("absolute error (log)")
         axes[0][-1].legend(fontsize=7)
         fig.suptitle(f"{image}: recovered parameters and errors per measure (thesis Figs. 2.6-2.8)", fontsize=9)
@@ -251,13 +257,14 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
     import matplotlib.pyplot as plt
 
     rows = [(r, res) for r in results if all(r.sweep.get(k) == v for k, v in params.where.items())
-            for _, res in _of_type(r, "LandscapeResult")]
+            for res in _of_type(r, LandscapeResult)]
     if not rows:
         return ReportOutput(notes=["no landscape results"])
-    fig, axes = plt.subplots(len(rows), 3, figsize=(13, 2.9 * len(rows)), squeeze=False)
+    width = max(len(res.values) for _, res in rows)
+    fig, axes = plt.subplots(len(rows), width, figsize=(4.3 * width, 2.9 * len(rows)), squeeze=False)
     table = []
     for k, (r, res) in enumerate(rows):
-        for j, name in enumerate(("tx", "ty", "angle")):
+        for j, name in enumerate(res.values):
             ax = axes[k][j]
             for a, alpha in enumerate(res.alphas):
                 v = res.values[name][a]
@@ -267,7 +274,7 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
                 table.append({"input": _label(r), "measure": res.label, "parameter": name, "alpha": alpha,
                               "peak_at": float(res.offsets[name][int(np.nanargmax(v))] + res.center[j]),
                               "max": float(np.nanmax(v)), "mean_over_max": sharp})
-            ax.set_xlabel(name + (" (deg)" if name == "angle" else " (px)"))
+            ax.set_xlabel(name + (" (deg)" if name.startswith("angle") else ""))
             ax.grid(alpha=0.3)
             if j == 0:
                 ax.set_ylabel(("value / max" if params.normalize == "max" else "value") + f"\n{res.label}", fontsize=8)
@@ -302,83 +309,60 @@ def overlay_rgb(fixed: np.ndarray, moving: np.ndarray) -> np.ndarray:
     return np.clip(np.stack([f, m, f], axis=-1), 0, 1)
 
 
-def before_after(fixed, moving, transform) -> tuple[np.ndarray, np.ndarray]:
-    """The moving image (or volume) on the fixed grid before (the files' own placement: identity about
-    the fixed centre) and after ``transform``; volumes are resampled in physical space, filled with the
-    moving minimum outside it."""
-    if np.ndim(fixed.data) == 3:
-        from topomatch.stages.registration.misalign3d import resample_volume
-        from topomatch.stages.registration.transform3d import RigidTransform3D
+def planes(image) -> list[tuple[str, np.ndarray, float]]:
+    """The 2D views of an image: a 2D image itself; the three central orthogonal planes of a volume (named by
+    array axis: which one is axial depends on the acquisition). Each: a label, the flat pixel indices of the
+    view (rows, cols; rows drawn downwards) and its aspect (row spacing / column spacing)."""
+    grid = np.arange(image.data.size).reshape(image.shape)
+    if image.dim == 2:
+        return [("", grid, image.spacing[1] / image.spacing[0])]
+    (nk, nj, ni), (sx, sy, sz) = image.shape, image.spacing
+    return [("slice k (array axis 0)", grid[nk // 2], sy / sx), ("slice j (array axis 1)", grid[::-1, nj // 2], sz / sx),
+            ("slice i (array axis 2)", grid[::-1, :, ni // 2], sz / sy)]
 
-        fill = float(moving.data.min())
-        return (resample_volume(moving, RigidTransform3D(center=tuple(fixed.center)), fixed, fill=fill),
-                resample_volume(moving, transform, fixed, fill=fill))
+
+def before_after(fixed, moving, transform, flat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The moving image on the fixed grid (or at its pixels ``flat``) before (the files' own placement: the
+    identity) and after ``transform``, resampled in physical space, the moving minimum outside it."""
     from topomatch.stages.registration.interpolation import resample
     from topomatch.stages.registration.transform import RigidTransform
 
-    identity = RigidTransform.for_image(fixed.shape).with_center(fixed.center)
-    return resample(moving, identity, fixed.shape), resample(moving, transform, fixed.shape)
+    fill = float(moving.data.min())
+    return tuple(resample(moving, t, fixed, fill=fill, flat=flat)  # type: ignore[return-value]
+                 for t in (RigidTransform.identity(tuple(fixed.center)), transform))
 
 
 def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
-    """Five panels on ``axes``: fixed, moving, checkerboard before, checkerboard after, colour overlay after."""
-    before, after = before_after(fixed, moving, registration.transform)
-    panels = [(fixed.data, "fixed"), (moving.data, "moving"), (checkerboard(fixed.data, before), "checkerboard before"),
-              (checkerboard(fixed.data, after), "checkerboard after"), (overlay_rgb(fixed.data, after),
-                                                                        "after: fixed magenta, moving green")]
-    for ax, (img, label) in zip(axes, panels):
-        ax.imshow(img, cmap="gray" if img.ndim == 2 else None, interpolation="nearest")
-        ax.set_title(label, fontsize=8)
-        ax.set_axis_off()
-    t = registration.transform
-    flag = "" if registration.ok else "  FLAGGED: " + registration.reason[:80]
-    axes[0].text(0, -0.18, f"{title}  {registration.method}: tx={t.tx:.2f} ty={t.ty:.2f} angle={t.angle:.2f} "
-                           f"({registration.seconds:.2f} s){flag}", transform=axes[0].transAxes, fontsize=8,
-                 color="#b00" if flag else "k")
+    """Per view of :func:`planes`, a row of five panels on ``axes`` (rows x 5): fixed, moving, checkerboards
+    before and after, colour overlay after."""
+    from topomatch.stages.registration.register import describe
+
+    for row, ((label, flat, aspect), (_, own, own_aspect)) in enumerate(zip(planes(fixed), planes(moving))):
+        f = fixed.data.ravel()[flat]
+        before, after = before_after(fixed, moving, registration.transform, flat)
+        panels = [(f, "fixed", aspect), (moving.data.ravel()[own], "moving", own_aspect),
+                  (checkerboard(f, before), "checkerboard before", aspect),
+                  (checkerboard(f, after), "checkerboard after", aspect),
+                  (overlay_rgb(f, after), "after: fixed magenta, moving green", aspect)]
+        for ax, (img, what, asp) in zip(axes[row], panels):
+            ax.imshow(img, cmap="gray" if img.ndim == 2 else None, interpolation="nearest", aspect=asp)
+            ax.set_title(f"{label}, {what}" if label else what, fontsize=8)
+            ax.set_axis_off()
+    flag = "" if registration.ok else "  FLAGGED: " + registration.reason[:100]
+    axes[0][0].text(0, -0.18 if len(axes) == 1 else 1.25, f"{title}  {registration.method}: "
+                    f"{describe(registration.transform)} ({registration.seconds:.2f} s){flag}",
+                    transform=axes[0][0].transAxes, fontsize=8, color="#b00" if flag else "k")
 
 
 def overlay_figure(fixed, moving, registration, title: str = ""):
-    """A one-row figure of :func:`draw_overlay`."""
+    """A figure of :func:`draw_overlay` (one row for a 2D image, three for a volume)."""
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 5, figsize=(16, 3.9))
+    rows = len(planes(fixed))
+    fig, axes = plt.subplots(rows, 5, figsize=(16, 3.9 * rows), squeeze=False)
     draw_overlay(axes, fixed, moving, registration, title)
-    fig.subplots_adjust(left=0.01, right=0.99, top=0.9, bottom=0.12, wspace=0.05)
-    return fig
-
-
-def volume_overlay_figure(fixed, moving, registration, title: str = ""):
-    """Three orthogonal slices through the fixed volume's centre (rows: array axes k, j, i; which one is
-    axial depends on the acquisition, so they are named by axis), each as a checkerboard of fixed and
-    moving before (the files' own placement, identity transform) and after the registration: a figure
-    of two columns."""
-    import matplotlib.pyplot as plt
-
-    from topomatch.stages.registration.misalign3d import resample_at
-    from topomatch.stages.registration.transform3d import RigidTransform3D
-
-    nk, nj, ni = fixed.shape
-    sx, sy, sz = fixed.spacing
-    grid = np.arange(fixed.data.size).reshape(fixed.shape)
-    views = [("slice k (array axis 0)", grid[nk // 2], sy / sx), ("slice j (array axis 1)", grid[:, nj // 2], sz / sx),
-             ("slice i (array axis 2)", grid[:, :, ni // 2], sz / sy)]
-    fill = float(moving.data.min())
-    identity = RigidTransform3D(center=tuple(fixed.center))
-    fig, axes = plt.subplots(3, 2, figsize=(8, 11))
-    for row, (label, plane, aspect) in enumerate(views):  # only the three planes shown are resampled
-        for col, (transform, when) in enumerate(((identity, "before"), (registration.transform, "after"))):
-            moved = resample_at(moving, transform, fixed, plane.ravel(), fill=fill).reshape(plane.shape)
-            ax = axes[row, col]
-            ax.imshow(checkerboard(fixed.data.ravel()[plane], moved), cmap="gray", interpolation="nearest",
-                      aspect=aspect, origin="lower" if row else "upper")
-            ax.set_title(f"{label}, {when}", fontsize=8)
-            ax.set_axis_off()
-    a, t = registration.transform.angles_deg, registration.transform.translation
-    flag = "" if registration.ok else "\nFLAGGED: " + registration.reason[:110]
-    fig.suptitle(f"{title}\n{registration.method}: angles ({a[0]:.2f}, {a[1]:.2f}, {a[2]:.2f}) deg, translation "
-                 f"({t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}) mm, {registration.seconds:.2f} s{flag}", fontsize=8,
-                 color="#b00" if flag else "k")
-    fig.subplots_adjust(left=0.02, right=0.98, top=0.92, bottom=0.02, wspace=0.05, hspace=0.12)
+    fig.subplots_adjust(left=0.01, right=0.99, top=0.9 if rows == 1 else 0.95, bottom=0.12 if rows == 1 else 0.02,
+                        wspace=0.05, hspace=0.25)
     return fig
 
 
@@ -389,7 +373,7 @@ def registered_items(results, method: str, limit: int) -> list[tuple[Any, Any]]:
     for r in results:
         if not r.ok or r.final("fixed") is None or r.final("moving") is None:
             continue
-        regs = [res.registration for res in r.results.values() if hasattr(res, "registration")
+        regs = [res.registration for res in r.results.values() if isinstance(res, RegisterResult)
                 and method in res.registration.method]
         if regs:
             chosen.append((r, regs[-1]))
@@ -410,9 +394,11 @@ def registration_overlay_report(experiment, results, params: OverlayParams) -> R
     chosen = registered_items(results, params.method, params.max_items)
     if not chosen:
         return ReportOutput(notes=["no registered items to draw"])
-    fig, axes = plt.subplots(len(chosen), 5, figsize=(16, 3.9 * len(chosen)), squeeze=False)
+    rows = [len(planes(r.final("fixed"))) for r, _ in chosen]
+    fig, axes = plt.subplots(sum(rows), 5, figsize=(16, 3.9 * sum(rows)), squeeze=False)
     for k, (r, reg) in enumerate(chosen):
-        draw_overlay(axes[k], r.final("fixed"), r.final("moving"), reg, title=_label(r))
+        first = sum(rows[:k])
+        draw_overlay(axes[first: first + rows[k]], r.final("fixed"), r.final("moving"), reg, title=_label(r))
     fig.subplots_adjust(left=0.01, right=0.99, top=0.95, bottom=0.05, wspace=0.05, hspace=0.3)
     return ReportOutput(figures={params.name: fig})
 
@@ -428,25 +414,23 @@ class RegistrationTableParams(Params):
 def registration_table_report(experiment, results, params: RegistrationTableParams) -> ReportOutput:
     """One row per item and method: estimate, truth, errors, TRE, self-check, time (in image units, degrees, s).
 
-    Translations, their errors and the TRE are in the images' physical units (pixels for PNG, mm for volumes),
-    angles in degrees, the time in seconds."""
+    Parameters by name (2D: angle, tx, ty; 3D: angle_x, angle_y, angle_z, tx, ty, tz); translations, their errors
+    (``d_<name>``, ``d_translation``) and the TRE in the images' physical units (pixels for PNG, mm for volumes),
+    angles and ``d_rotation`` in degrees, the time in seconds."""
     rows = []
     for r in results:
-        evals = [res for _, res in _of_type(r, "EvaluateResult")]
-        regs = [res.registration for _, res in r.results.items() if hasattr(res, "registration")]
+        evals = _of_type(r, EvaluateResult)
+        regs = [res.registration for res in _of_type(r, RegisterResult)]
         for k, reg in enumerate(regs):
             ev = next((e for e in evals if e.method == reg.method), None)
             t = reg.transform
-            row = {"item": r.item_id, "input": _label(r), "method": reg.method}
-            if hasattr(t, "angles_deg"):  # a 3D registration: six parameters (degrees, mm)
-                row.update(dict(zip(("angle_x", "angle_y", "angle_z", "tx", "ty", "tz"),
-                                    (*t.angles_deg, *map(float, t.translation)))))
-            else:
-                row.update({"tx": t.tx, "ty": t.ty, "angle": t.angle})
+            row = {"item": r.item_id, "input": _label(r), "method": reg.method,
+                   **dict(zip(t.names, (*t.angles_deg, *map(float, t.translation))))}
             if ev is not None:
-                row.update({f"true_{k}": v for k, v in ev.truth.items() if not k.startswith("c")})
-                row.update({"d_tx": ev.d_tx, "d_ty": ev.d_ty, "d_angle": ev.d_angle, "tre_mean": ev.tre_mean,
-                            "tre_max": ev.tre_max, "success": ev.success})
+                row.update({f"true_{k}": v for k, v in ev.truth.items()})
+                row.update({**{f"d_{k}": v for k, v in ev.errors.items()}, "d_rotation": ev.d_rotation,
+                            "d_translation": ev.d_translation, "tre_mean": ev.tre_mean, "tre_max": ev.tre_max,
+                            "success": ev.success})
             row.update({"ok": reg.ok, "reason": reg.reason, "iterations": reg.iterations,
                         "evaluations": reg.evaluations, "seconds": reg.seconds})
             rows.append(row)
@@ -492,7 +476,7 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
 
     evaluations, seen = [], set()
     for r in results:
-        for _, ev in _of_type(r, "EvaluateResult"):
+        for ev in _of_type(r, EvaluateResult):
             # a stage before a swept one (e.g. SimpleITK before register.metric.name) repeats per sweep point: count once
             key = (_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values()))
             if key not in seen:
@@ -516,7 +500,7 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
     axes[0].set_xscale("log")
     axes[0].set_xlim(1e-3, 1e4)
     axes[0].axvline(params.threshold, color="r", lw=0.8)
-    axes[0].set_xlabel("mean target registration error (px, log); success rate on the right")
+    axes[0].set_xlabel("mean target registration error (px or mm, log); success rate on the right")
     axes[1].set_xlabel("seconds per registration")
     fig.tight_layout()
     return ReportOutput(tables={params.name: rows}, figures={params.name: fig})

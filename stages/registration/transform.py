@@ -1,21 +1,11 @@
-"""The rigid transform about the image centre, in ITK's convention.
+"""The rigid transform of 2D and 3D registration, in ITK's convention (SimpleITK's ``Euler2DTransform`` /
+``Euler3DTransform``), on physical points.
 
-A point is ``x = (col, row)`` in pixels. The transform with parameters ``(tx, ty, angle)``,
-angle in degrees, maps a point of the fixed image to a point of the moving image::
-
-    T(x) = R(angle) (x - c) + c + t,    R(a) = [[cos a, -sin a], [sin a, cos a]],
-
-with ``c = ((W - 1) / 2, (H - 1) / 2)`` the centre of the fixed image and ``t = (tx, ty)``.
-Registration finds ``T`` such that ``moving(T(x)) ~ fixed(x)``: this is exactly SimpleITK's
-``Euler2DTransform(center=c, angle=radians(angle), translation=t)`` used to resample the moving
-image onto the fixed grid (origin 0, spacing 1), so parameters compare directly with
-ITK/SimpleITK. Since the structure at ``x`` in the fixed image is at ``T(x)`` in the moving
-image, the moving image shows the fixed content moved by ``T``: with the row axis pointing down
-on screen, a positive angle turns it clockwise, ``tx > 0`` moves it right and ``ty > 0`` down.
-
-The thesis writes ``Phi(x) = R x + t`` with ``R = [[cos a, sin a], [-sin a, cos a]]``, which is
-ITK's ``R(-a)``: a thesis angle ``a`` about the same centre is the ITK angle ``-a`` with the same
-translation (:func:`from_thesis`, :meth:`RigidTransform.to_thesis`).
+``T(p) = R (p - c) + c + t``, ``c`` the fixed grid's centre, ``fixed(p) ~ moving(T(p))``; ``parameters`` are
+SimpleITK's, rotation first, radians: 2D ``(angle, tx, ty)`` with ``R(a) = [[cos a, -sin a], [sin a, cos a]]``,
+3D ``(ax, ay, az, tx, ty, tz)`` with ``R = Rz(az) Rx(ax) Ry(ay)`` (``ComputeZYX`` off). The dimensions differ only
+in this parametrisation. The thesis's ``R = [[cos a, sin a], [-sin a, cos a]]`` is ITK's ``R(-a)``
+(:func:`from_thesis`). See docs/registration.md, "Conventions".
 """
 
 from __future__ import annotations
@@ -25,101 +15,178 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from topomatch.stages.registration.image import image_center
+NAMES = {2: ("angle", "tx", "ty"), 3: ("angle_x", "angle_y", "angle_z", "tx", "ty", "tz")}
+"""Parameter names per dimension, SimpleITK's order."""
 
 
-def rotation_matrix(angle_deg: float) -> np.ndarray:
-    """``R(a) = [[cos a, -sin a], [sin a, cos a]]`` for ``a`` in degrees, shape (2, 2)."""
-    a = math.radians(angle_deg)
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, -s], [s, c]])
+def n_angles(dim: int) -> int:
+    """Euler angles of a rigid transform in ``dim`` dimensions (1 or 3)."""
+    return len(NAMES[dim]) - dim
+
+
+def euler_matrix(angles) -> np.ndarray:
+    """The rotation of Euler angles (radians): one angle -> ``R(a)`` (2, 2); three -> ``Rz Rx Ry`` (3, 3)."""
+    angles = [float(a) for a in np.ravel(angles)]
+    if len(angles) == 1:
+        c, s = math.cos(angles[0]), math.sin(angles[0])
+        return np.array([[c, -s], [s, c]])
+    (cx, sx), (cy, sy), (cz, sz) = ((math.cos(a), math.sin(a)) for a in angles)
+    Rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
+    Ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    Rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
+    return Rz @ Rx @ Ry
+
+
+def euler_angles(R: np.ndarray) -> tuple[float, ...]:
+    """The Euler angles of a rotation matrix, inverse of :func:`euler_matrix` (3D: ITK's rule,
+    ``ax = asin(R[2, 1])`` in [-pi/2, pi/2])."""
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape == (2, 2):
+        return (math.atan2(R[1, 0], R[0, 0]),)
+    ax = math.asin(max(-1.0, min(1.0, R[2, 1])))
+    if abs(math.cos(ax)) > 1e-9:
+        return ax, math.atan2(-R[2, 0], R[2, 2]), math.atan2(-R[0, 1], R[1, 1])
+    return ax, math.atan2(R[0, 2], R[0, 0]), 0.0  # gimbal lock: az = 0
 
 
 @dataclass(frozen=True)
 class RigidTransform:
-    """``T(x) = R(angle)(x - c) + c + (tx, ty)`` for points ``x = (col, row)`` in pixels.
+    """``T(p) = R(angles)(p - c) + c + t`` on physical points.
 
     Attributes
     ----------
-    tx, ty : float
-        Translation in pixels (columns, rows).
-    angle : float
-        Rotation in degrees (ITK sign: ``R = [[cos, -sin], [sin, cos]]`` on (col, row)).
-    center : tuple of float
-        Rotation centre ``(cx, cy)`` in (col, row) pixels, normally the fixed image's centre.
+    parameters : tuple of 3 or 6 floats
+        SimpleITK's ``GetParameters()``: 2D ``(angle, tx, ty)``, 3D ``(ax, ay, az, tx, ty, tz)``; radians
+        and physical units.
+    center : tuple of 2 or 3 floats
+        The centre ``c``.
     """
 
-    tx: float
-    ty: float
-    angle: float
-    center: tuple[float, float]
+    parameters: tuple[float, ...]
+    center: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        p, c = tuple(float(v) for v in self.parameters), tuple(float(v) for v in self.center)
+        if len(c) not in NAMES or len(p) != len(NAMES[len(c)]):
+            raise ValueError(f"a rigid transform about a {len(c)}D centre has "
+                             f"{len(NAMES.get(len(c), ()))} parameters, got {len(p)}")
+        object.__setattr__(self, "parameters", p)
+        object.__setattr__(self, "center", c)
 
     @classmethod
-    def for_image(cls, shape: tuple[int, int], tx: float = 0.0, ty: float = 0.0, angle: float = 0.0) -> "RigidTransform":
-        """The transform with the given parameters about the centre of an image of ``shape`` (H, W)."""
-        return cls(float(tx), float(ty), float(angle), image_center(shape))
+    def identity(cls, center) -> "RigidTransform":
+        return cls((0.0,) * len(NAMES[len(center)]), tuple(center))
 
     @classmethod
-    def from_params(cls, theta, center: tuple[float, float]) -> "RigidTransform":
-        """From a parameter vector ``(tx, ty, angle)``."""
-        tx, ty, angle = (float(v) for v in theta)
-        return cls(tx, ty, angle, (float(center[0]), float(center[1])))
+    def euler2d(cls, tx: float, ty: float, angle_deg: float, center) -> "RigidTransform":
+        """A 2D transform from ``(tx, ty, angle)`` with the angle in degrees (the 2D tables' convention)."""
+        return cls((math.radians(angle_deg), tx, ty), tuple(center))
 
     @property
-    def params(self) -> np.ndarray:
-        """``(tx, ty, angle)``, shape (3,)."""
-        return np.array([self.tx, self.ty, self.angle])
+    def dim(self) -> int:
+        return len(self.center)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return NAMES[self.dim]
+
+    @property
+    def angles(self) -> tuple[float, ...]:
+        """The Euler angles (radians)."""
+        return self.parameters[: n_angles(self.dim)]
+
+    @property
+    def angles_deg(self) -> tuple[float, ...]:
+        return tuple(math.degrees(a) for a in self.angles)
+
+    @property
+    def translation(self) -> np.ndarray:
+        return np.array(self.parameters[n_angles(self.dim):])
+
+    # the 2D tables' names: translation in physical units (pixels for a PNG), angle in degrees
+    tx = property(lambda self: float(self.translation[0]))
+    ty = property(lambda self: float(self.translation[1]))
+    angle = property(lambda self: self.angles_deg[0] if self.dim == 2 else math.nan)
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return euler_matrix(self.angles)
+
+    @property
+    def offset(self) -> np.ndarray:
+        """``c + t - R c``: ``T(p) = R p + offset``."""
+        c = np.asarray(self.center)
+        return c + self.translation - self.rotation @ c
 
     def matrix(self) -> np.ndarray:
-        """The rotation ``R(angle)``, shape (2, 2)."""
-        return rotation_matrix(self.angle)
-
-    def homogeneous(self) -> np.ndarray:
-        """The 3 x 3 matrix ``M`` with ``M @ (x, y, 1) = (T(x), 1)``."""
-        R = self.matrix()
-        c = np.asarray(self.center)
-        M = np.eye(3)
-        M[:2, :2] = R
-        M[:2, 2] = c + np.array([self.tx, self.ty]) - R @ c
+        """The homogeneous (d + 1) x (d + 1) matrix of T (fixed-to-moving)."""
+        M = np.eye(self.dim + 1)
+        M[:-1, :-1] = self.rotation
+        M[:-1, -1] = self.offset
         return M
 
     def apply(self, points: np.ndarray) -> np.ndarray:
-        """Map points ``(n, 2)`` given as (col, row) to ``T(points)``, shape (n, 2)."""
-        p = np.asarray(points, dtype=np.float64)
-        c = np.asarray(self.center)
-        return (p - c) @ self.matrix().T + c + np.array([self.tx, self.ty])
+        """T of points (n, d) -> (n, d)."""
+        return np.asarray(points, dtype=np.float64) @ self.rotation.T + self.offset
+
+    @classmethod
+    def from_matrix(cls, M: np.ndarray, center) -> "RigidTransform":
+        """A rigid homogeneous matrix written about ``center``."""
+        M = np.asarray(M, dtype=np.float64)
+        c = np.asarray(center, dtype=np.float64)
+        R = M[:-1, :-1]
+        return cls(euler_angles(R) + tuple(M[:-1, -1] - c + R @ c), tuple(c))
+
+    def with_center(self, center) -> "RigidTransform":
+        """The same map written about another centre (same angles, another translation)."""
+        return RigidTransform.from_matrix(self.matrix(), center)
 
     def inverse(self) -> "RigidTransform":
-        """``T^{-1}(y) = R(-a)(y - c) + c - R(-a) t``, about the same centre."""
-        t = rotation_matrix(-self.angle) @ np.array([self.tx, self.ty])
-        return RigidTransform(float(-t[0]), float(-t[1]), -self.angle, self.center)
+        """T^-1, about the same centre."""
+        return RigidTransform.from_matrix(np.linalg.inv(self.matrix()), self.center)
 
     def to_thesis(self) -> tuple[float, float, float]:
-        """The thesis's ``(tx, ty, a)`` with ``R = [[cos a, sin a], [-sin a, cos a]]`` about the same centre."""
+        """2D: the thesis's ``(tx, ty, a)`` (degrees) with ``R = [[cos a, sin a], [-sin a, cos a]]``, same centre."""
         return (self.tx, self.ty, -self.angle)
 
-    def with_center(self, center: tuple[float, float]) -> "RigidTransform":
-        """The same map of the plane written about another centre (the translation changes)."""
-        R = self.matrix()
-        c_old, c_new = np.asarray(self.center), np.asarray(center, dtype=float)
-        # R(x - c_old) + c_old + t = R(x - c_new) + c_new + t'  =>  t' = t + (R - I)(c_new - c_old)
-        t = np.array([self.tx, self.ty]) + (R - np.eye(2)) @ (c_new - c_old)
-        return RigidTransform(float(t[0]), float(t[1]), self.angle, (float(center[0]), float(center[1])))
+    def to_sitk(self):
+        """The SimpleITK ``Euler2DTransform`` / ``Euler3DTransform`` of the same map."""
+        import SimpleITK as sitk
+
+        t = sitk.Euler2DTransform() if self.dim == 2 else sitk.Euler3DTransform()
+        t.SetCenter(self.center)
+        t.SetParameters(self.parameters)
+        return t
+
+    @classmethod
+    def from_sitk(cls, transform, center=None) -> "RigidTransform":
+        """Any SimpleITK transform with a matrix and translation (Euler, Versor, Affine, a composite of one),
+        written about ``center`` (default: its own)."""
+        import SimpleITK as sitk
+
+        if transform.GetName() == "CompositeTransform":
+            comp = sitk.CompositeTransform(transform)
+            if comp.GetNumberOfTransforms() != 1:
+                raise ValueError(f"expected one rigid transform, got a composite of {comp.GetNumberOfTransforms()}")
+            transform = comp.GetNthTransform(0)
+        tr = transform.Downcast() if hasattr(transform, "Downcast") else transform
+        d = tr.GetDimension()
+        c = np.asarray(tr.GetCenter())
+        M = np.eye(d + 1)
+        M[:d, :d] = np.asarray(tr.GetMatrix()).reshape(d, d)
+        M[:d, d] = np.asarray(tr.GetTranslation()) + c - M[:d, :d] @ c
+        return cls.from_matrix(M, c if center is None else center)
 
 
-def from_thesis(tx: float, ty: float, angle: float, center: tuple[float, float]) -> RigidTransform:
-    """The ITK-convention transform of thesis parameters (``R_thesis(a) = R_ITK(-a)``)."""
-    return RigidTransform(float(tx), float(ty), -float(angle), (float(center[0]), float(center[1])))
+RigidTransform3D = RigidTransform
+"""The name of the 3D transform before 2D and 3D shared one (kept for a release)."""
 
 
-def grid_points(shape: tuple[int, int]) -> np.ndarray:
-    """Centres of every pixel of an image of shape (H, W) as (col, row), shape (H * W, 2), row-major."""
-    H, W = shape
-    rows, cols = np.mgrid[0:H, 0:W]
-    return np.column_stack([cols.ravel(), rows.ravel()]).astype(np.float64)
+def from_thesis(tx: float, ty: float, angle: float, center) -> RigidTransform:
+    """The ITK-convention 2D transform of thesis parameters (``R_thesis(a) = R_ITK(-a)``, degrees)."""
+    return RigidTransform.euler2d(tx, ty, -angle, center)
 
 
-def target_registration_error(estimate: RigidTransform, truth: RigidTransform, shape: tuple[int, int]) -> np.ndarray:
-    """``|| T_est(x) - T_true(x) ||`` in pixels for every pixel centre x of a grid of ``shape``, (H * W,)."""
-    pts = grid_points(shape)
-    return np.linalg.norm(estimate.apply(pts) - truth.apply(pts), axis=1)
+def target_registration_error(estimate: RigidTransform, truth: RigidTransform, points: np.ndarray) -> np.ndarray:
+    """``|T_est(p) - T_true(p)|`` (physical units) at points (n, d), shape (n,)."""
+    return np.linalg.norm(estimate.apply(points) - truth.apply(points), axis=1)

@@ -121,21 +121,16 @@ class SliceViewerParams(Params):
 @report("registration_viewer", params=SliceViewerParams)
 def registration_viewer_report(experiment, results, params: SliceViewerParams) -> ReportOutput:
     """Interactive viewers of registered pairs: fixed and moving (before or after) with an opacity slider."""
+    from topomatch.stages.registration.register import describe
     from topomatch.stages.registration.reports import before_after, registered_items
 
     fragments = []
     for r, reg in registered_items(results, params.method, params.max_items):
-        fixed, t = r.final("fixed"), reg.transform
-        before, after = before_after(fixed, r.final("moving"), t)
-        if np.ndim(fixed.data) == 3:  # a volume: spacing given as (x, y, z)
-            spacing = tuple(reversed(fixed.spacing))
-            a, shift = t.angles_deg, t.translation
-            what = (f"angles ({a[0]:.2f}, {a[1]:.2f}, {a[2]:.2f}) deg, translation ({shift[0]:.2f}, {shift[1]:.2f}, "
-                    f"{shift[2]:.2f}) mm")
-        else:
-            spacing, what = fixed.spacing, f"tx={t.tx:.2f} ty={t.ty:.2f} angle={t.angle:.2f}"
-        title = f"{r.input_label or r.item_id}: {reg.method}, {what}"
-        fragments.append(slice_viewer(fixed.data, before, after, spacing, title, f"{params.name}-{len(fragments)}"))
+        fixed = r.final("fixed")
+        before, after = before_after(fixed, r.final("moving"), reg.transform)
+        title = f"{r.input_label or r.item_id}: {reg.method}, {describe(reg.transform)}"
+        fragments.append(slice_viewer(fixed.data, before, after, fixed.spacing[::-1], title,
+                                      f"{params.name}-{len(fragments)}"))
     if not fragments:
         return ReportOutput(notes=["no registered pair to show"])
     return ReportOutput(html={params.name: "".join(fragments)},

@@ -70,8 +70,8 @@ MESH_CHAIN = [
     "d2", "spherical_harmonics", {"shapedna": {"k": 10}},
 ]
 IMAGE_CHAIN = [
-    "load_pair", {"misalign_pair": {"theta": [3.0, -2.0, 4.0]}},
-    {"register": {"schedule": [{"factor": 2, "iterations": 20}]}}, "evaluate",
+    "load_pair", {"misalign_pair": {"theta": [4.0, 3.0, -2.0]}},
+    {"register": {"schedule": [{"spacing": 2.0, "iterations": 20}]}}, "evaluate",
     "register_sitk", {"landscape": {"points": 5}},
 ]
 
@@ -79,11 +79,11 @@ VOLUME = ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz"
 FAST_3D = {"schedule": [{"spacing": 8.0, "iterations": 10, "samples": 2000}], "start": {"steps": 0},
            "check": {"search": False}}
 VOLUME_CHAIN = [
-    "load_volume", {"misalign_volume": {"index": 1, "seed": 4, "multimodal": True}},
-    {"register_3d": FAST_3D}, "evaluate_3d",
+    "load_image", {"misalign": {"index": 1, "seed": 4, "contrast": "t2_like", "crop": 0.7}},
+    {"register": FAST_3D}, "evaluate",
     {"register_sitk_3d": {"shrink": [4], "smoothing": [2.0], "iterations": 5}},
 ]
-VOLUME_PAIR_CHAIN = ["load_volume_pair", {"register_3d": FAST_3D}]
+VOLUME_PAIR_CHAIN = ["load_pair", {"register_3d": FAST_3D}, "evaluate_3d"]
 
 
 def _items(tmp_path):
@@ -96,7 +96,8 @@ def _items(tmp_path):
     volumes = build_experiment({"name": "all-volume-stages", "inputs": {"images": [str(VOLUME)]},
                                 "stages": VOLUME_CHAIN, "executor": {"workers": 1}})
     volume_pairs = build_experiment({"name": "volume-pair-stages", "inputs": {"pairs": [
-        {"fixed": str(VOLUME), "moving": str(VOLUME)}]}, "stages": VOLUME_PAIR_CHAIN, "executor": {"workers": 1}})
+        {"fixed": str(VOLUME), "moving": str(VOLUME), "truth": {"tx": 0.0}}]}, "stages": VOLUME_PAIR_CHAIN,
+        "executor": {"workers": 1}})
     return meshes.items() + images.items() + volumes.items() + volume_pairs.items()
 
 

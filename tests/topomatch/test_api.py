@@ -99,8 +99,9 @@ def test_register_images_in_memory_equals_the_command(capsys):
     fixed, moving = topomatch.read_image(fixed_path), topomatch.read_image(moving_path)
     api = topomatch.register(fixed, moving)
     cli = cli_json(capsys, "register", fixed_path, moving_path)
-    assert set(cli) == set(topomatch.RegistrationOutcome.JSON_FIELDS)
-    for key in ("tx", "ty", "angle", "objective", "iterations", "ok", "metric", "alpha", "method"):
+    assert set(cli) == set(api.to_dict())
+    for key in ("tx", "ty", "angle", "parameters", "matrix", "objective", "iterations", "ok", "metric", "alpha",
+                "method", "flags"):
         assert api.to_dict()[key] == cli[key], key
     assert api.ok and api.tx == pytest.approx(13, abs=0.1) and api.ty == pytest.approx(17, abs=0.1)
 

@@ -28,7 +28,9 @@ def test_cli_json_recovers_the_itk_translation(capsys, itk_dir):
     res = json.loads(out)
     assert res["tx"] == pytest.approx(13, abs=0.1) and res["ty"] == pytest.approx(17, abs=0.1)
     assert abs(res["angle"]) < 0.1 and res["ok"] and res["metric"] == "jt"
-    assert {"objective", "iterations", "seconds", "center", "convention"} <= set(res)
+    assert {"objective", "iterations", "seconds", "center", "convention", "parameters", "names", "matrix"} <= set(res)
+    assert res["dimension"] == 2 and res["names"] == ["angle", "tx", "ty"] and len(res["matrix"]) == 3
+    assert res["parameters"][1:] == pytest.approx([res["tx"], res["ty"]], abs=1e-6)
 
 
 def test_cli_text_and_outputs(capsys, itk_dir, tmp_path):
@@ -49,14 +51,14 @@ def test_cli_flags_a_misalignment_outside_the_capture_range(capsys, pd_slice, tm
     from topomatch.stages.registration.misalign import moved
     from topomatch.stages.registration.transform import RigidTransform
 
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 0, 0, 150))
+    moving = moved(pd_slice, RigidTransform.euler2d(0, 0, 150, pd_slice.center))
     path = tmp_path / "upside_down.png"
     PILImage.fromarray(np.clip(moving.data, 0, 255).astype(np.uint8)).save(path)
     PILImage.fromarray(pd_slice.data.astype(np.uint8)).save(tmp_path / "fixed.png")
     code, out, err = register_cli(capsys, tmp_path / "fixed.png", path, "--json")
     assert code == 1
     assert json.loads(out)["ok"] is False
-    assert "registration flagged" in err and "capture range" in err
+    assert "registration flagged" in err and json.loads(out)["flags"]
 
 
 def test_cli_bad_inputs(capsys, itk_dir, tmp_path):
@@ -88,22 +90,22 @@ def volume_pair(tmp_path_factory):
     """A small fixed volume (KmeansTest at 4 x 4 x 3 mm, .nii.gz) and a moved, T2-like, NRRD copy; the true T."""
     import SimpleITK as sitk
 
-    from topomatch.stages.registration.misalign3d import make_case
-    from topomatch.stages.registration.volume_io import read_volume, volume_to_sitk
+    from topomatch.stages.registration.io import read_volume, to_sitk
+    from topomatch.stages.registration.misalign import make_case
 
     folder = tmp_path_factory.mktemp("volumes")
     case = make_case(read_volume(REPO_ROOT / "data/images/itk/KmeansTest_T1UCharRaw.nii.gz").shrink((2, 2, 1)), 3,
                      seed=21, multimodal=True, crop=False)
-    sitk.WriteImage(volume_to_sitk(case.fixed), str(folder / "fixed.nii.gz"))
-    sitk.WriteImage(sitk.Cast(volume_to_sitk(case.moving), sitk.sitkInt16), str(folder / "moving.nrrd"))
+    sitk.WriteImage(to_sitk(case.fixed), str(folder / "fixed.nii.gz"))
+    sitk.WriteImage(sitk.Cast(to_sitk(case.moving), sitk.sitkInt16), str(folder / "moving.nrrd"))
     return folder / "fixed.nii.gz", folder / "moving.nrrd", case
 
 
 def test_cli_3d_json_matrix_tfm_and_resampled_geometry(capsys, volume_pair, tmp_path):
     import SimpleITK as sitk
 
-    from topomatch.stages.registration.misalign3d import mean_tre
-    from topomatch.stages.registration.transform3d import RigidTransform3D
+    from topomatch.stages.registration.evaluate import tre_points
+    from topomatch.stages.registration.transform import RigidTransform, target_registration_error
 
     fixed, moving, case = volume_pair
     code, out, _ = register_cli(capsys, fixed, moving, "--json", "--out", tmp_path / "out")
@@ -111,8 +113,8 @@ def test_cli_3d_json_matrix_tfm_and_resampled_geometry(capsys, volume_pair, tmp_
     res = json.loads(out)
     check(res, "register")  # the documented --json schema covers 3D results too
     assert res["dimension"] == 3 and res["ok"] and len(res["parameters"]) == 6
-    estimate = RigidTransform3D(res["parameters"], res["center"])
-    assert mean_tre(case.truth, estimate, case.fixed) < 1.0
+    estimate = RigidTransform(res["parameters"], res["center"])
+    assert target_registration_error(estimate, case.truth, tre_points(case.fixed)).mean() < 1.0
     np.testing.assert_allclose(res["center"], case.fixed.center, atol=1e-6)
     # the matrix is SimpleITK's Euler3DTransform of the printed parameters, and what transform.tfm holds
     e = sitk.Euler3DTransform(res["center"], *res["parameters"][:3], res["parameters"][3:])
@@ -136,7 +138,7 @@ def test_cli_3d_bad_inputs(capsys, volume_pair, itk_dir, tmp_path):
 
     fixed, _, _ = volume_pair
     code, _, err = register_cli(capsys, fixed, itk_dir / "BrainT1Slice.png")
-    assert code == 1 and "BrainT1Slice.png" in err and "different dimensionality" in err
+    assert code == 1 and "fixed.nii.gz" in err and "BrainT1Slice.png is 2D" in err and "different dimensionality" in err
     nib.save(nib.Nifti1Image(np.random.default_rng(0).normal(size=(8, 8, 8, 2)).astype(np.float32), np.eye(4)),
              tmp_path / "series.nii.gz")
     code, _, err = register_cli(capsys, fixed, tmp_path / "series.nii.gz")
@@ -165,9 +167,11 @@ def test_2d_outputs_include_an_itk_transform_and_the_input_format(capsys, itk_di
     ours = np.asarray(PILImage.open(tmp_path / "png" / "moving_resampled.tif"))
     inside = by_sitk > 0
     assert inside.mean() > 0.5 and np.abs(by_sitk[inside] - ours[inside]).mean() < 1.0  # grey levels of 0..255
-    # NIfTI input: the resampled image comes back as NIfTI too
+    # NIfTI input: the resampled image comes back as NIfTI too. Written with the PNG's geometry (origin 0, unit
+    # spacing, ITK's identity direction: in NIfTI's RAS frame, x and y flipped); with an identity RAS affine the
+    # image would be, physically, the PNG turned by 180 degrees
     data = np.asarray(PILImage.open(moving_png), dtype=np.float32)
-    nib.save(nib.Nifti1Image(data.T[:, :, None], np.diag([1.0, 1.0, 1.0, 1.0])), tmp_path / "moving.nii.gz")
+    nib.save(nib.Nifti1Image(data.T[:, :, None], np.diag([-1.0, -1.0, 1.0, 1.0])), tmp_path / "moving.nii.gz")
     code, out, _ = register_cli(capsys, fixed_png, tmp_path / "moving.nii.gz", "--json", "--out", tmp_path / "nii")
     assert code == 0 and (tmp_path / "nii" / "moving_resampled.nii.gz").is_file()
     back = sitk.GetArrayFromImage(sitk.ReadImage(str(tmp_path / "nii" / "moving_resampled.nii.gz")))

@@ -1,16 +1,12 @@
 """``topomatch register FIXED MOVING``: rigid registration of two images or two volumes, without a config file.
 
-Two 3D volumes (NIfTI, MetaImage, NRRD, DICOM file or series folder) without ``--fixed-slice`` /
-``--moving-slice`` are registered in 3D (:func:`topomatch.registration.register_volumes_with`): the
-summary or ``--json`` object is :class:`topomatch.registration.VolumeRegistrationOutcome`'s fields
-(six parameters, centre and the 4 x 4 fixed-to-moving ``matrix`` in physical LPS mm), and ``--out``
-writes the moving volume resampled onto the fixed grid, ``transform.tfm``, an overlay figure and
-``registration.json`` (:func:`topomatch.registration.write_volume_registration_files`).
-
-Options come from the ``load_pair`` and ``register`` params (:data:`topomatch.registration.REGISTER_OPTIONS`);
-the summary or ``--json`` object is :class:`topomatch.registration.RegistrationOutcome`'s fields.
-With ``--out DIR`` it also writes the moving image resampled onto the fixed grid, an overlay
-figure and ``registration.json`` (:func:`topomatch.registration.write_registration_files`).
+Two 2D images (or slices: ``--fixed-slice`` / ``--moving-slice``) or two 3D volumes (NIfTI, MetaImage,
+NRRD, DICOM file or series folder), the same command: options come from the ``load_pair`` and ``register``
+params (:data:`topomatch.registration.REGISTER_OPTIONS`); the summary or ``--json`` object is
+:class:`topomatch.registration.RegistrationOutcome`'s fields (the parameters, centre and homogeneous
+fixed-to-moving ``matrix`` in physical units). With ``--out DIR`` it also writes the moving image resampled
+onto the fixed grid, ``transform.tfm``, an overlay figure and ``registration.json``
+(:func:`topomatch.registration.write_registration_files`).
 
 Exit status: 0 when the registration passed its self-check, 1 when it was flagged (the result is
 still printed, with the reason), 1 for unreadable or unusable images, 2 for bad options.
@@ -32,7 +28,7 @@ class RegistrationFlagged(TopomatchError):
 
 def _models() -> dict:
     from topomatch.stages.registration.io import LoadPairParams
-    from topomatch.stages.registration.register import RegisterParams
+    from topomatch.stages.registration.params import RegisterParams
 
     return {"load_pair": LoadPairParams, "register": RegisterParams}
 
@@ -45,12 +41,12 @@ def _options() -> list[Option]:
 
 def add_parsers(sub) -> None:
     command(sub, "register", help="rigidly register a moving image to a fixed image",
-            description="Rigid registration of MOVING to FIXED by an entropic measure (Jensen-Tsallis by default, "
-                        "thesis ch. 2) with coarse-to-fine SPSA. 2D images: (tx, ty, angle) in ITK's convention, "
-                        "T(x) = R(angle)(x - c) + c + t, x = (column, row) pixels, c = ((W-1)/2, (H-1)/2) of FIXED, "
-                        "moving(T(x)) ~ fixed(x). Two 3D volumes (NIfTI, MetaImage, NRRD, DICOM folder): six "
-                        "parameters of SimpleITK's Euler3DTransform about the fixed volume's centre, in physical LPS "
-                        "mm, and the 4 x 4 fixed-to-moving matrix.",
+            description="Rigid registration of MOVING to FIXED, two 2D images or two 3D volumes, by an entropic "
+                        "measure (Jensen-Tsallis by default, thesis ch. 2) with coarse-to-fine SPSA, in ITK's "
+                        "convention: T(p) = R (p - c) + c + t on physical points (column, row pixels for a PNG; LPS mm "
+                        "for a volume), c = the centre of FIXED's grid, moving(T(p)) ~ fixed(p). Prints SimpleITK's "
+                        "Euler2D parameters (2D: tx, ty, angle in degrees) or Euler3D parameters (3D: angles, "
+                        "translation), the centre and the homogeneous fixed-to-moving matrix.",
             handler=cmd_register, build=_arguments)
 
 
@@ -60,30 +56,22 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("moving", help="moving (target) image or volume")
     add_options(p, _models(), _options())
     p.add_argument("--out", type=path_argument, metavar="DIR", help="write the moving image resampled on the fixed grid "
-                   "(moving_resampled.png and .tif; 3D: in the moving file's format), transform.tfm, overlay.png and "
-                   "registration.json")
+                   "(moving_resampled in the moving file's format; PNG also as a float32 .tif), transform.tfm, "
+                   "overlay.png and registration.json")
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 
 def cmd_register(args: argparse.Namespace) -> int:
-    from topomatch.registration import (
-        VolumeRegistrationOutcome,
-        register_with,
-        write_registration_files,
-        write_volume_registration_files,
-    )
+    from topomatch.registration import register_with, write_registration_files
 
     if args.out:
         check_writable_folder(args.out)  # before the registration runs, not after
     outcome = register_with(args.fixed, args.moving, given_options(args, _models(), _options()))
     summary = outcome.to_dict()
-    volumes = isinstance(outcome, VolumeRegistrationOutcome)
     if args.out:
-        write = write_volume_registration_files if volumes else write_registration_files
-        summary["files"] = write(outcome, args.out)
-    keys = (("angles", "translation", "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok",
-             "reason", "method", "files") if volumes else
-            ("tx", "ty", "angle", "objective", "iterations", "seconds", "ok", "reason", "method", "center", "files"))
+        summary["files"] = write_registration_files(outcome, args.out)
+    keys = (("tx", "ty", "angle") if outcome.dimension == 2 else ("angles", "translation")) + (
+        "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok", "reason", "method", "files")
     print_result(summary, as_json=args.json, keys=keys)
     if not outcome.ok:
         raise RegistrationFlagged(f"registration flagged: {outcome.reason}")

@@ -84,12 +84,12 @@ def test_itk_configs_validate_and_name_their_cases():
 
 def test_volumes_3d_config_reduced(tmp_path):
     # SimpleITK reduced to its coarsest level (its accuracy is the benchmark's business)
-    outcome = _run(CONFIGS / "volumes_3d.yaml", tmp_path, ["sweep.misalign_volume.index=[0]",
-                                                            "sweep.misalign_volume.multimodal=[true]",
+    outcome = _run(CONFIGS / "volumes_3d.yaml", tmp_path, ["sweep.misalign.index=[0]",
+                                                            "sweep.misalign.contrast=[t2_like]",
                                                             "register_sitk_3d.shrink=[4]",
                                                             "register_sitk_3d.smoothing=[2.0]"])
     assert not outcome.failed and len(outcome.items) == 1
     rows = json.loads((outcome.run_dir / "tables" / "cases.json").read_text())
-    assert {r["method"] for r in rows} == {"spsa/jt(alpha=2 histogram)/3d", "simpleitk/mattes(regular_step)/3d"}
+    assert {r["method"] for r in rows} == {"spsa/jt(alpha=2 histogram)", "simpleitk/mattes(regular_step)"}
     ours = next(r for r in rows if r["method"].startswith("spsa"))
     assert ours["tre_mean"] < 1.0 and ours["ok"] and {"angle_x", "tz", "true_angle_z"} <= set(ours)

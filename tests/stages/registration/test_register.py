@@ -1,42 +1,54 @@
-"""Registration end to end: known transforms recovered, ITK cases, determinism, failures flagged."""
+"""Registration end to end, 2D and 3D: known transforms recovered, ITK cases, determinism, defaults per dimension."""
 
 from __future__ import annotations
 
 import csv
+import math
 
 import numpy as np
 import pytest
 
+from tests_paths import ITK_DIR
 from topomatch.pipeline.errors import ConfigError, StageError
 from topomatch.stages.registration.evaluate import evaluate_registration
+from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.io import read_image
-from topomatch.stages.registration.misalign import moved
-from topomatch.stages.registration.register import LevelSpec, RegisterParams, register
+from topomatch.stages.registration.misalign import make_case, moved
+from topomatch.stages.registration.params import DIMENSION_DEFAULTS, RegisterParams, for_dimension
+from topomatch.stages.registration.register import register
 from topomatch.stages.registration.transform import RigidTransform
 
 
-def _truth(theta):
-    return dict(zip(("tx", "ty", "angle"), theta))
+def _moved(image, tx, ty, angle):
+    return moved(image, RigidTransform.euler2d(tx, ty, angle, image.center))
+
+
+def _truth(tx, ty, angle):
+    return {"tx": tx, "ty": ty, "angle": angle}
+
+
+@pytest.fixture(scope="module")
+def small_t1():
+    """The bundled KmeansTest T1 volume (128 x 128 x 62 voxels of 2 x 2 x 3 mm) block-averaged to 4 x 4 x 3 mm."""
+    return read_image(ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz").shrink((2, 2, 1))
 
 
 @pytest.mark.parametrize("theta", [(5, 5, 5), (10, 20, 20)])
 def test_thesis_misalignments_recovered(pd_slice, theta):
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, *theta))
-    reg = register(pd_slice, moving)
-    ev = evaluate_registration(pd_slice, reg, _truth(theta))
+    reg = register(pd_slice, _moved(pd_slice, *theta))
+    ev = evaluate_registration(pd_slice, reg, _truth(*theta))
     assert reg.ok, reg.reason
     assert ev.tre_mean < 0.2, (reg.transform, ev)
 
 
 def test_multimodal_misalignment_recovered(pd_slice, t1_slice):
     theta = (-12.0, 8.0, -17.0)
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, *theta))
-    reg = register(t1_slice, moving, RegisterParams(metric="mi"))
-    assert evaluate_registration(t1_slice, reg, _truth(theta)).tre_mean < 0.3
+    reg = register(t1_slice, _moved(pd_slice, *theta), RegisterParams(metric="mi"))
+    assert evaluate_registration(t1_slice, reg, _truth(*theta)).tre_mean < 0.3
 
 
-def _itk_cases(itk_dir):
-    with open(itk_dir / "registration_pairs.csv", newline="") as fh:
+def _itk_cases():
+    with open(ITK_DIR / "registration_pairs.csv", newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if r["consensus_tx"]]
     return {r["moving"] + "|" + r["fixed"]: r for r in rows}
 
@@ -47,87 +59,122 @@ def _itk_cases(itk_dir):
     "BrainProtonDensitySliceR10X13Y17.png|BrainProtonDensitySliceBorder20.png",
     "BrainProtonDensitySlice.png|BrainT1Slice.png",
 ])
-def test_itk_cases_within_a_tenth_of_a_pixel(itk_dir, key):
-    r = _itk_cases(itk_dir)[key]
-    fixed, moving = read_image(itk_dir / r["fixed"]), read_image(itk_dir / r["moving"])
-    truth = {"tx": float(r["consensus_tx"]), "ty": float(r["consensus_ty"]), "angle": float(r["consensus_rotation_deg"])}
+def test_itk_cases_within_a_tenth_of_a_pixel(key):
+    r = _itk_cases()[key]
+    fixed, moving = read_image(ITK_DIR / r["fixed"]), read_image(ITK_DIR / r["moving"])
+    truth = _truth(float(r["consensus_tx"]), float(r["consensus_ty"]), float(r["consensus_rotation_deg"]))
     reg = register(fixed, moving)
     ev = evaluate_registration(fixed, reg, truth)
     assert reg.ok and ev.tre_mean <= 0.1, (key, reg.transform, ev.tre_mean)
 
 
-def test_itk_rotated10_is_the_rotation_about_itks_physical_centre(itk_dir):
+def test_itk_rotated10_is_the_rotation_about_itks_physical_centre():
     """The CSV's Rotated10 row, (0.094, -0.079, 10) about ((W-1)/2, (H-1)/2), is 10 degrees about ITK's
     physical centre (W/2, H/2): (I - R(10 deg)) (0.5, 0.5) = (0.094, -0.079)."""
-    import math
-
-    rows = _itk_cases(itk_dir)
-    r = next(r for r in rows.values() if r["moving"] == "BrainProtonDensitySliceRotated10.png")
+    r = next(r for r in _itk_cases().values() if r["moving"] == "BrainProtonDensitySliceRotated10.png")
     c, s_ = math.cos(math.radians(10)), math.sin(math.radians(10))
     expected = (0.5 - (c * 0.5 - s_ * 0.5), 0.5 - (s_ * 0.5 + c * 0.5))
     assert (float(r["consensus_tx"]), float(r["consensus_ty"])) == pytest.approx(expected, abs=5e-4)
 
 
-def test_same_seed_same_result(pd_slice):
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 4, -6, 9))
-    a = register(pd_slice, moving, RegisterParams(seed=3))
-    b = register(pd_slice, moving, RegisterParams(seed=3))
-    c = register(pd_slice, moving, RegisterParams(seed=4))
-    np.testing.assert_array_equal(a.transform.params, b.transform.params)
+def test_anisotropic_pixels_register_in_physical_units(pd_slice):
+    """The same slice with 0.8 x 1.5 mm pixels, moved by a rigid transform in mm: recovered in mm (a registration
+    in pixels would see a shear)."""
+    fixed = Image(pd_slice.shrink((1, 2)).data, spacing=(0.8, 1.5), name="aniso")
+    truth = RigidTransform.euler2d(4.0, -6.0, 12.0, fixed.center)
+    reg = register(fixed, moved(fixed, truth))
+    ev = evaluate_registration(fixed, reg, _truth(4.0, -6.0, 12.0))
+    assert reg.ok and ev.tre_mean < 0.3, (reg.transform, ev)
+
+
+@pytest.mark.parametrize("index,multimodal,crop", [(0, False, False), (1, True, True)])
+def test_3d_known_transform_recovered(small_t1, index, multimodal, crop):
+    case = make_case(small_t1, index, seed=11, multimodal=multimodal, crop=crop)
+    reg = register(case.fixed, case.moving)
+    ev = evaluate_registration(case.fixed, reg, dict(zip(case.truth.names, (*case.truth.angles_deg,
+                                                                          *case.truth.translation))))
+    assert ev.tre_mean < 1.0 and reg.ok, (ev.tre_mean, reg.reason)
+    assert reg.transform.center == tuple(case.fixed.center) and reg.transform.dim == 3
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_same_seed_same_result(pd_slice, small_t1, d):
+    if d == 2:
+        fixed, moving = pd_slice, _moved(pd_slice, 4, -6, 9)
+    else:
+        case = make_case(small_t1, 2, seed=5, multimodal=False, crop=False)
+        fixed, moving = case.fixed, case.moving
+    a, b, c = (register(fixed, moving, RegisterParams(seed=s, check={"search": False})) for s in (3, 3, 4))
+    np.testing.assert_array_equal(a.transform.parameters, b.transform.parameters)
     np.testing.assert_array_equal(a.history["theta"], b.history["theta"])
-    assert not np.array_equal(a.transform.params, c.transform.params)
-    assert np.abs(a.transform.params - c.transform.params).max() < 0.2
+    assert a.transform.parameters != c.transform.parameters
 
 
 def test_history_levels_and_counts(pd_slice):
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 2, 3, 4))
     seen = []
-    reg = register(pd_slice, moving, callback=lambda level, k, theta, value: seen.append(level))
+    reg = register(pd_slice, _moved(pd_slice, 2, 3, 4), callback=lambda level, k, theta, value: seen.append(level))
     h = reg.history
     assert len(h["level"]) == reg.iterations == len(seen) == 260 + 40 + 30
     assert h["theta"].shape == (reg.iterations, 3) and sorted(set(h["level"])) == [0, 1, 2]
     assert reg.evaluations > 2 * reg.iterations and reg.seconds > 0 and reg.stop_reason == "max_iterations"
     assert reg.summary()["method"] == "spsa/jt(alpha=2 histogram)"
+    assert set(("angle", "tx", "ty", "ok", "flags", "overlap")) <= set(reg.summary())
 
 
 def test_powell_deterministic(pd_slice):
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 5, 10, 15))
+    moving = _moved(pd_slice, 5, 10, 15)
     a = register(pd_slice, moving, RegisterParams(optimizer="powell"))
     b = register(pd_slice, moving, RegisterParams(optimizer="powell"))
-    np.testing.assert_array_equal(a.transform.params, b.transform.params)
-    assert evaluate_registration(pd_slice, a, _truth((5, 10, 15))).tre_mean < 0.1
+    assert a.transform.parameters == b.transform.parameters
+    assert evaluate_registration(pd_slice, a, _truth(5, 10, 15)).tre_mean < 0.1
 
 
 def test_outside_the_capture_range_is_flagged(pd_slice):
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 0, 0, 120))
+    moving = _moved(pd_slice, 0, 0, 120)
     reg = register(pd_slice, moving)
-    assert not reg.ok
-    assert "capture range" in reg.reason
-    with pytest.raises(StageError, match="registration failed: .*capture range"):
+    assert not reg.ok and "capture" in [f.check for f in reg.flags] or "bounds" in [f.check for f in reg.flags]
+    with pytest.raises(StageError, match="registration failed: "):
         register(pd_slice, moving, RegisterParams(check={"on_failure": "error"}))
 
 
 def test_estimate_on_the_search_bound_is_flagged(pd_slice):
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, 18, 0, 0))
-    params = RegisterParams(bounds={"max_translation": 6}, transform={"init": "geometry"}, check={"capture": False})
-    reg = register(pd_slice, moving, params)
-    assert not reg.ok and "search bound of tx" in reg.reason
+    params = RegisterParams(bounds={"max_translation": 6}, transform={"init": "geometry"}, check={"search": False})
+    reg = register(pd_slice, _moved(pd_slice, 18, 0, 0), params)
+    assert not reg.ok and "search bound of tx" in reg.reason and reg.flags[0].check == "bounds"
 
 
 def test_retry_from_a_probe_extends_the_capture_range(pd_slice):
     """A 45-degree misalignment: the first pass may stop short, the capture check finds the probe and retries."""
-    theta = (3.0, -4.0, 45.0)
-    moving = moved(pd_slice, RigidTransform.for_image(pd_slice.shape, *theta))
-    reg = register(pd_slice, moving)
-    assert reg.ok and evaluate_registration(pd_slice, reg, _truth(theta)).tre_mean < 0.3
+    reg = register(pd_slice, _moved(pd_slice, 3.0, -4.0, 45.0))
+    assert reg.ok and evaluate_registration(pd_slice, reg, _truth(3.0, -4.0, 45.0)).tre_mean < 0.3
 
 
-def test_small_images_skip_coarse_levels(blob_image):
-    moving = moved(blob_image, RigidTransform.for_image(blob_image.shape, 2.0, -1.5, 6.0))
-    reg = register(blob_image, moving, RegisterParams(schedule=[LevelSpec(factor=16, iterations=10),
-                                                                LevelSpec(factor=1, iterations=200, step=0.5, c=0.5)]))
-    assert evaluate_registration(blob_image, reg, _truth((2.0, -1.5, 6.0))).tre_mean < 0.3
-    assert set(reg.history["level"]) == {0}  # only the full-resolution level ran
+def test_levels_with_too_few_samples_are_measured_on_a_finer_grid_smoothed(blob_image):
+    """A 64 x 80 image at 16 px per pixel would keep 20 samples: that level is measured on the native grid,
+    smoothed, and the known transform is still recovered."""
+    schedule = [{"spacing": 16.0, "iterations": 60, "step": 2.0, "c": 2.0, "interpolation": "linear"},
+                {"spacing": 0.0, "iterations": 200, "step": 0.5, "c": 0.5}]
+    reg = register(blob_image, _moved(blob_image, 2.0, -1.5, 6.0), RegisterParams(schedule=schedule))
+    assert evaluate_registration(blob_image, reg, _truth(2.0, -1.5, 6.0)).tre_mean < 0.3
+    assert set(reg.history["level"]) == {0, 1}
+
+
+def test_dimension_defaults_apply_under_what_the_caller_set():
+    two, three = for_dimension(RegisterParams(), 2), for_dimension(RegisterParams(), 3)
+    assert [lv.spacing for lv in two.schedule] == [4.0, 2.0, 0.0] and three.schedule[-1].spacing == 2.0
+    assert two.start.steps == 0 and three.start.steps == 2 and three.check.chance == 3.0 and two.check.chance == 0
+    given = for_dimension(RegisterParams.model_validate({"bounds": {"max_angle": 30.0}, "check": {"retry": False}}), 3)
+    assert given.bounds.max_angle == 30.0  # the caller's value wins
+    assert given.check.retry is False and given.check.chance == DIMENSION_DEFAULTS[3]["check"]["chance"]
+    custom = for_dimension(RegisterParams(schedule=[{"spacing": 1.0}]), 3)
+    assert [lv.spacing for lv in custom.schedule] == [1.0]
+
+
+def test_inputs_are_checked(pd_slice, small_t1):
+    with pytest.raises(StageError, match="2D fixed image"):
+        register(pd_slice, small_t1)
+    with pytest.raises(StageError, match="mask"):
+        register(pd_slice, pd_slice, fixed_mask=np.zeros(pd_slice.shape, bool))
 
 
 def test_params_are_validated():
@@ -135,7 +182,66 @@ def test_params_are_validated():
         RegisterParams.parse({"metric": "nmi"}, "register")
     with pytest.raises(ConfigError, match=r"register.schedule\[0\].bins: Input should be greater than or equal to 2"):
         RegisterParams.parse({"schedule": [{"bins": 1}]}, "register")
-    with pytest.raises(ConfigError, match="register.schedule: List should have at least 1 item"):
-        RegisterParams.parse({"schedule": []}, "register")
     with pytest.raises(ConfigError, match="register.metric.alpha: Input should be greater than 0"):
         RegisterParams.parse({"metric": {"alpha": 0}}, "register")
+    with pytest.raises(ConfigError, match="register.sampling.region"):
+        RegisterParams.parse({"sampling": {"region": "brain"}}, "register")
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_initial_translations_map_the_reference_points(d):
+    from topomatch.stages.registration.register import initial_translation
+    from topomatch.stages.registration.transform import euler_matrix
+
+    shape = (20, 30) if d == 2 else (12, 14, 16)
+    data = np.zeros(shape)
+    data[tuple(slice(2, 6) for _ in range(d))] = 10.0
+    fixed = Image(data, spacing=(1.0, 2.0, 1.5)[:d], origin=(3.0, -1.0, 2.0)[:d])
+    moving = Image(np.roll(data, 3, axis=0), spacing=(0.5, 1.0, 1.0)[:d], origin=(-7.0, 4.0, 0.0)[:d])
+    k = 1 if d == 2 else 3
+    angles = np.full(k, 0.3)
+    t = initial_translation(fixed, moving, "moments", angles)
+    R, c = euler_matrix(angles), fixed.center
+    np.testing.assert_allclose(R @ (fixed.centroid() - c) + c + t, moving.centroid(), atol=1e-9)
+    np.testing.assert_allclose(initial_translation(fixed, moving, "geometry"), moving.center - fixed.center)
+
+
+def test_sample_mask_grows_the_foreground_by_the_margin():
+    from topomatch.stages.registration.params import for_dimension
+    from topomatch.stages.registration.register import sample_mask
+
+    data = np.zeros((30, 40))
+    data[10:20, 15:25] = 100.0
+    image = Image(data, spacing=(2.0, 2.0))
+    assert sample_mask(image, for_dimension(RegisterParams(sampling={"region": "all"}), 2)) is None
+    grown = sample_mask(image, for_dimension(RegisterParams(sampling={"region": "foreground", "margin": 4.0}), 2))
+    assert grown.sum() == (10 + 4) * (10 + 4)  # two pixels of 2 mm on every side
+
+
+def test_objective_is_undefined_below_the_overlap_and_weighted_above():
+    from topomatch.stages.registration.histogram import Binning, JointHistogram
+    from topomatch.stages.registration.objective import Objective
+
+    image = Image(np.add.outer(np.arange(20.0), np.arange(30.0)) % 7)
+    b = Binning.of(image.data, 8)
+    jh = JointHistogram(image, image, b, b, center=image.center, mode="linear")
+    plain = Objective(jh, "mi", min_overlap=0.5)
+    weighted = Objective(jh, "mi", min_overlap=0.5, overlap_power=1.0)
+    shift = np.array([0.0, 10.0, 0.0])  # a third of the columns leave the moving grid
+    assert jh.overlap(shift) == pytest.approx(20 / 30)
+    assert weighted(shift) == pytest.approx(plain(shift) * 20 / 30)
+    assert plain(np.array([0.0, 20.0, 0.0])) == -math.inf  # a third of the samples is below min_overlap
+
+
+def test_before_after_of_the_identity_is_the_moving_image():
+    from topomatch.stages.registration.reports import before_after, planes
+    from topomatch.stages.registration.transform import RigidTransform
+
+    vol = Image(np.random.default_rng(0).random((6, 7, 8)), spacing=(1.0, 2.0, 3.0))
+    identity = RigidTransform.identity(tuple(vol.center))
+    before, after = before_after(vol, vol, identity)
+    np.testing.assert_allclose(before, vol.data, atol=1e-12)
+    np.testing.assert_allclose(after, vol.data, atol=1e-12)
+    views = planes(vol)
+    assert [v[1].shape for v in views] == [(7, 8), (6, 8), (6, 7)] and views[1][2] == pytest.approx(3.0)
+    assert len(planes(Image(np.zeros((5, 6))))) == 1

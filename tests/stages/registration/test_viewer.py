@@ -62,18 +62,19 @@ def test_volume_report_resamples_in_physical_space():
     a volume shifted by 4 voxels along i and 'registered' by the true shift looks like the fixed one."""
     from types import SimpleNamespace
 
-    from topomatch.stages.registration.transform3d import RigidTransform3D
+    from topomatch.stages.registration.image import Image
+    from topomatch.stages.registration.register import RegisterResult
+    from topomatch.stages.registration.transform import RigidTransform
     from topomatch.stages.registration.viewer import SliceViewerParams, registration_viewer_report
-    from topomatch.stages.registration.volume import Volume
 
     k, j, i = np.mgrid[:20, :30, :40]
     blob = np.exp(-((k - 10) ** 2 / 20 + (j - 15) ** 2 / 40 + (i - 20) ** 2 / 60))
-    fixed = Volume(blob, spacing=(1.0, 1.0, 2.0))
-    moving = Volume(np.roll(blob, 4, axis=2), spacing=(1.0, 1.0, 2.0))  # 4 voxels of 1 mm along x (axis i)
-    truth = RigidTransform3D(params=(0, 0, 0, 4.0, 0, 0), center=tuple(fixed.center))
+    fixed = Image(blob, spacing=(1.0, 1.0, 2.0))
+    moving = Image(np.roll(blob, 4, axis=2), spacing=(1.0, 1.0, 2.0))  # 4 voxels of 1 mm along x (axis i)
+    truth = RigidTransform((0, 0, 0, 4.0, 0, 0), tuple(fixed.center))
     registration = SimpleNamespace(transform=truth, method="test")
-    item = SimpleNamespace(ok=True, input_label="blob", item_id="blob", results={"register_3d": SimpleNamespace(
-        registration=registration)}, final=lambda key: {"fixed": fixed, "moving": moving}.get(key))
+    item = SimpleNamespace(ok=True, input_label="blob", item_id="blob", results={"register": RegisterResult(
+        registration)}, final=lambda key: {"fixed": fixed, "moving": moving}.get(key))
     out = registration_viewer_report(None, [item], SliceViewerParams(name="v"))
     html = out.html["v"]
     payload = json.loads(re.search(r"var root=.*?, d=(\{.*?\}), sh=", html, re.S).group(1))

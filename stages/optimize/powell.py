@@ -1,8 +1,8 @@
 """A deterministic optimiser for the same objectives: Powell's conjugate-direction method (scipy).
 
-Same interface as :func:`topomatch.stages.registration.spsa.spsa_maximize`: it maximises ``f`` over
+Same interface as :func:`topomatch.stages.optimize.spsa.spsa_maximize`: it maximises ``f`` over
 parameters scaled by ``scales``, within bounds, and returns an
-:class:`~topomatch.stages.registration.spsa.OptimizeResult` with a per-iteration history. Invalid points
+:class:`~topomatch.stages.optimize.spsa.OptimizeResult` with a per-iteration history. Invalid points
 (``f = -inf``) become a large finite penalty for scipy's line searches.
 """
 
@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from topomatch.stages.registration.spsa import OptimizeResult
+from topomatch.stages.optimize.spsa import OptimizeResult
 
 
 @dataclass(frozen=True)

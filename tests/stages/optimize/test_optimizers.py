@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from topomatch.stages.registration.powell import PowellSettings, powell_maximize
-from topomatch.stages.registration.spsa import SPSASettings, spsa_maximize
+from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
+from topomatch.stages.optimize.spsa import SPSASettings, spsa_maximize
 
 TARGET = np.array([3.0, -2.0, 5.0])
 

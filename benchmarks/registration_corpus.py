@@ -1,0 +1,1156 @@
+"""A validation corpus of the rigid registrations users bring: ours, elastix and SimpleITK on the same cases, one run.
+
+Usage::
+
+    .venv/bin/python benchmarks/registration_corpus.py --list                 # the cases per split/dim/source/kind
+    .venv/bin/python benchmarks/registration_corpus.py --selftest             # the scoring and the case geometry
+    .venv/bin/python benchmarks/registration_corpus.py --generate             # build every case, no registration
+    TOPOMATCH_DATA_ROOT=/work/shared/data .venv/bin/python benchmarks/registration_corpus.py \\
+        [--split tune|report|all] [--dims 2,3] [--methods ours,elastix,simpleitk] [--metrics jt,jr,mi,tmi] \\
+        [--kinds t1,labels] [--sources mni,kmeans] [--limit N] [--cases-scale 1.0] [--cache DIR] \\
+        [--json benchmarks/results/registration_corpus.json]
+    .venv/bin/python benchmarks/registration_corpus.py --montage /tmp/corpus.png --limit 3   # fixed / moving pictures
+
+Every case is a fixed image and a moving image made from one public source by a known rigid T
+(fixed-to-moving, ``fixed(p) ~ moving(T(p))``; ``moving(q) = content(T^-1(q))`` on the source's grid),
+written as NIfTI files (``.nii.gz``, float32, geometry kept) and registered by every method from them.
+
+Sources (public data, read where it is installed; nothing is copied into the repository):
+
+- 3D ``mni``: nilearn's bundled MNI152 2009a template (T1, GM and WM probability maps, 1 mm, skull-stripped),
+  resampled to 2 mm (98 x 116 x 94, linear); GM and WM as fractions in [0, 1], the brain mask
+  ``T1 > 0`` with holes filled (a fraction after resampling), CSF = clip(mask - GM - WM, 0, 1).
+- 3D ``kmeans``: the bundled ITK ``KmeansTest_T1UCharRaw`` (a whole head with skull, 2 x 2 x 3 mm).
+- 3D ``anatomical``: nibabel's ``anatomical.nii`` under ``$TOPOMATCH_DATA_ROOT/images/nibabel_testdata``
+  (33 x 41 x 25 voxels of 2 mm, a small field of view); its cases are left out when the data root is not set.
+- 2D ``mni-axial``, ``mni-coronal``, ``mni-sagittal``: sections of the MNI maps at 1 or 2 mm (drawn per
+  case) at a height drawn uniformly between the first and last section whose brain area is at least 5 % of
+  the largest (bottom to top of the brain), coronal and sagittal ones shown head up; the grid either as
+  is, cropped to 70-90 % per axis (the brain may be cut), or padded by 5-40 pixels per side (a third each).
+  Spacing (s, s) mm, origin 0, identity direction (what ``read_image(..., slice_index=)`` gives).
+- 2D ``itk``: the bundled ITK slices ``BrainT1Slice.png`` (the fixed image, head with skull) and
+  ``BrainProtonDensitySlice.png`` (the same slice in PD contrast, used by the ``pd`` kind), 1 pixel units.
+
+Sources without tissue fractions (``kmeans``, ``anatomical``, ``itk``) use as mask the largest component of
+the Otsu foreground with its holes filled (``kmeans``: the head; ``itk``: the brain, which its dark skull
+cuts off from the scalp; ``anatomical``: most of its brain-only field of view) and three foreground classes
+by a two-threshold Otsu (for ``labels``).
+
+Moving-image kinds (:data:`KIND_MAKERS`; the fixed image is the source's T1 with noise unless swapped):
+
+- ``t1``: the same contrast.
+- ``t2``, ``pd``: BrainWeb-style contrasts from the tissue fractions, ``sum_k fraction_k * value_k``
+  (T2: CSF 1.0, GM 0.45, WM 0.30; PD: CSF 1.0, GM 0.86, WM 0.77; each value times U(0.9, 1.1) per case,
+  x 200); without fractions ``misalign.t2_like`` for T2 and :func:`pd_like` (its compressed mirror:
+  CSF > GM > WM, 1.0 ... 0.78) for PD; ``itk`` uses its real PD slice.
+- ``labels``: a label map (0 background, 1 CSF, 2 GM, 3 WM: the largest fraction, or the Otsu classes).
+- ``silhouette``: the mask (MNI: the brain) at one value (1), dilated by 0-3 voxels (drawn), plus noise.
+- ``threshold``: the T1 (with its bias field and noise) above a percentile drawn in [20, 80] of its
+  foreground: binary 0 / 1.
+- ``saturated``: the T1 clipped at a percentile drawn in [5, 20] of its foreground (near uniform inside
+  the object), plus noise.
+- ``inverted`` (from ``report`` on): the T1's negative (its maximum minus it): a bright background.
+- ``gamma`` (from ``report`` on): the T1 to a power drawn in [0.3, 3] (monotonic, non-linear), plus noise.
+
+A third of the ``labels`` and ``silhouette`` cases of each source (the 2nd, 5th, 8th ... of the kind) are
+*swapped*: the fixed image is the label map or silhouette of the source, the moving one the moved T1 (with
+the degradations).
+
+Degradations, drawn per case: Gaussian noise of U(1, 3) % of the image's range (99.5th percentile minus
+minimum) on the fixed and the moving image (each its own level; none on labels, and the binary threshold
+image gets it before thresholding); a multiplicative bias field on the moving image (half the cases:
+``1 + a f`` with ``f`` a random quadratic of the grid coordinates normalised to max |f| = 1, ``a`` in
+[0.1, 0.2]: +-10 to 20 %); thick slices (3D, 30 %: every map smoothed along the third axis to 4 mm slices
+and resampled to 2 x 2 x 4 mm before the kind is made); a partial field of view (25 %: the moving image
+cropped by ``misalign.crop_slab`` to a 60-80 % slab along a random axis). The rigid T: each translation uniform in
++-15 (mm; pixels for ``itk``), each angle in +-15 deg (3D) or +-20 deg (2D), about the fixed grid's centre
+(``misalign.random_transform``). The moved maps are resampled by cubic B-spline (T1, PD) or linearly
+(fractions, mask), the map's minimum outside.
+
+Seeding: case ``i`` of a (split, source, dimension) draws everything from
+``numpy.random.default_rng([SEEDS[split, source, dim], i])`` (noise from ``[seed, i, 1]``), always in the same
+order, whatever its kind: it is the same case whatever the other cases are. Its kind is
+``KINDS[split][(i + p) % n]`` with ``p`` the source's place in its split (so that the first cases of a split
+mix sources and kinds and ``--limit`` picks a mix); the cases of a split and dimension are listed round-robin
+over its sources.
+
+Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its results were seen):
+
+- ``tune`` (where the defaults and the self-check's thresholds were chosen): 3D ``mni`` (40), ``kmeans`` (15),
+  ``anatomical`` (15); 2D ``mni-axial`` (80), ``mni-coronal`` (20), ``itk`` (20); kinds ``t1`` ... ``saturated``.
+- ``dev``: the first report split. Its results were seen while the thresholds were being chosen, so it is
+  not held out any more; kept for comparison.
+- ``report``: fresh seeds, an unseen source (3D ``mni15``: the MNI maps at 1.5 mm) and two unseen kinds
+  (``inverted``: the T1's negative, a dark head on a bright background; ``gamma``: the T1 to a power drawn in
+  [0.3, 3]). Its results led to one change (the content of an image became the Otsu class off the grid's
+  border, for the inverted kind), so it too is seen now.
+- ``confirm``: drawn after that change, to check it on unseen cases: fresh seeds, the unseen kinds again next
+  to ``t1``, ``t2``, ``labels``, ``silhouette``, and an unseen frame (``tight``: the MNI sections cropped to
+  45-60 % per axis, so that the brain fills much of the grid's border, the case the border rule could get
+  wrong). It confirmed the inverted kind (13 of 13 correct and passed) and found one false alarm on a
+  tight frame (a border 52 % bright); the rule gained its middle band (no background: all is content), and
+  the silhouettes' silent errors (3 of 14) led to the ``outline`` test (its threshold read on ``tune``).
+  Seen.
+- ``holdout``: drawn after both, run once, never chosen on: fresh seeds, every source, every kind, the
+  ``tight`` frame. The numbers this project reports.
+
+``--cases-scale`` scales every count.
+
+Methods (all in one process, one case after the other, each with its library defaults and thread count):
+``ours-<metric>`` = ``topomatch.register(fixed_path, moving_path, metric=m)`` (time: the call's wall time,
+reading the files included); ``elastix`` = ``itk.elastix_registration_method`` with
+``GetDefaultParameterMap("rigid")`` unchanged (time in process, from the in-memory images; ITK's start-up paid
+once before any timing), its EulerTransform parameters (SimpleITK's order) rewritten about the fixed centre;
+``simpleitk`` = :func:`~topomatch.stages.registration.simpleitk_reference.sitk_register` with
+``SimpleITK3DParams()`` / ``SimpleITKParams()``. Each method runs once on a warm-up case per dimension first.
+
+Scoring: TRE = mean over ``evaluate.tre_points(fixed)`` (every pixel in 2D, the Otsu foreground in 3D) of
+``|T_est(p) - T_true(p)|`` in physical units (mm; pixels for ``itk``). A result is *correct* when its TRE is
+at most 1 mm in 3D and 1 pixel in 2D (a 2 mm section: 2 mm); a method that raises scores as wrong and flagged. Summary
+per split x dim x subset (all; each kind; each source; swapped; cropped; thick) x method: cases, within 1,
+median TRE, median seconds, false flags (correct but not ok), flagged wrong (wrong, not ok), silent wrong
+(wrong and ok); per split x dim and ours metric: the cases ours gets wrong where elastix is within 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field, replace
+from functools import lru_cache
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from scipy import ndimage
+
+from topomatch.stages.registration.evaluate import tre_points
+from topomatch.stages.registration.image import Image, otsu_threshold
+from topomatch.stages.registration.interpolation import resample
+from topomatch.stages.registration.io import read_image
+from topomatch.stages.registration.misalign import crop_slab, random_transform, t2_like, tissue_contrast
+from topomatch.stages.registration.transform import RigidTransform, target_registration_error
+
+ROOT = Path(__file__).resolve().parent.parent
+ITK_DIR = ROOT / "data" / "images" / "itk"
+
+SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
+    "tune": {3: [("mni", 40), ("kmeans", 15), ("anatomical", 15)],
+             2: [("mni-axial", 80), ("mni-coronal", 20), ("itk", 20)]},
+    "dev": {3: [("mni", 30), ("kmeans", 15), ("anatomical", 15)],
+            2: [("mni-axial", 30), ("mni-coronal", 30), ("mni-sagittal", 30), ("itk", 30)]},
+    "report": {3: [("mni", 30), ("kmeans", 15), ("anatomical", 15), ("mni15", 15)],
+               2: [("mni-axial", 30), ("mni-coronal", 30), ("mni-sagittal", 30), ("itk", 30)]},
+    "confirm": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6)],
+                2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 20)]},
+    "holdout": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+}
+"""Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
+
+KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated"),
+         "dev": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated"),
+         "report": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "confirm": ("t1", "t2", "labels", "silhouette", "inverted", "gamma"),
+         "holdout": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
+
+SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
+         ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
+         ("tune", "itk", 2): 1602,
+         ("dev", "mni", 3): 2103, ("dev", "kmeans", 3): 2203, ("dev", "anatomical", 3): 2303,
+         ("dev", "mni-axial", 2): 2102, ("dev", "mni-coronal", 2): 2402,
+         ("dev", "mni-sagittal", 2): 2502, ("dev", "itk", 2): 2602,
+         ("report", "mni", 3): 3103, ("report", "kmeans", 3): 3203, ("report", "anatomical", 3): 3303,
+         ("report", "mni15", 3): 3703, ("report", "mni-axial", 2): 3102, ("report", "mni-coronal", 2): 3402,
+         ("report", "mni-sagittal", 2): 3502, ("report", "itk", 2): 3602,
+         ("confirm", "mni", 3): 4103, ("confirm", "mni15", 3): 4703, ("confirm", "kmeans", 3): 4203,
+         ("confirm", "mni-axial", 2): 4102, ("confirm", "mni-coronal", 2): 4402, ("confirm", "mni-sagittal", 2): 4502,
+         ("confirm", "itk", 2): 4602,
+         ("holdout", "mni", 3): 5103, ("holdout", "mni15", 3): 5703, ("holdout", "kmeans", 3): 5203,
+         ("holdout", "anatomical", 3): 5303, ("holdout", "mni-axial", 2): 5102, ("holdout", "mni-coronal", 2): 5402,
+         ("holdout", "mni-sagittal", 2): 5502, ("holdout", "itk", 2): 5602}
+
+SPLIT_ORDER = {"tune": 0, "dev": 1, "report": 2, "confirm": 3, "holdout": 4}
+SWAPPABLE = ("labels", "silhouette")
+TISSUES = ("csf", "gm", "wm")
+T2_VALUES = (1.0, 0.45, 0.30)
+PD_VALUES = (1.0, 0.86, 0.77)
+CONTRAST_SCALE = 200.0
+MAX_TRANSLATION = 15.0
+MAX_ANGLE = {2: 20.0, 3: 15.0}
+THICK_SLICE_MM = 4.0
+SUCCESS_TRE = 1.0
+
+
+# ---------------------------------------------------------------------------------------------------- sources
+
+
+@dataclass(frozen=True, eq=False)
+class Fields:
+    """A source on one grid: ``grid`` (an Image whose data is the T1) and its maps (arrays of the grid's shape):
+    ``t1``, ``mask`` (fraction in [0, 1]), optionally ``csf``/``gm``/``wm`` fractions and ``pd`` (a real PD image),
+    and ``classes`` (the two T1 thresholds between the Otsu classes, for sources without fractions)."""
+
+    grid: Image
+    maps: dict[str, np.ndarray]
+    classes: tuple[float, float] | None = None
+
+    @property
+    def has_fractions(self) -> bool:
+        return "gm" in self.maps
+
+    def on(self, grid: Image, maps: dict[str, np.ndarray]) -> "Fields":
+        return Fields(grid, maps, self.classes)
+
+
+def _largest_filled(mask: np.ndarray) -> np.ndarray:
+    """The largest connected component of ``mask`` with its holes filled (in 3D also slice by slice along each
+    axis: the channels of a head cut by the field of view are open to the outside in 3D)."""
+    labels, n = ndimage.label(mask)
+    if n > 1:
+        sizes = ndimage.sum(mask, labels, range(1, n + 1))
+        mask = labels == 1 + int(np.argmax(sizes))
+    mask = ndimage.binary_fill_holes(mask)
+    if mask.ndim == 3:
+        for axis in range(3):
+            mask = np.stack([ndimage.binary_fill_holes(s) for s in np.moveaxis(mask, axis, 0)], axis=axis)
+    return mask
+
+
+def multi_otsu(values: np.ndarray, bins: int = 128) -> tuple[float, float]:
+    """Two thresholds splitting ``values`` into three classes of maximal between-class variance."""
+    counts, edges = np.histogram(values, bins=bins)
+    centers = 0.5 * (edges[:-1] + edges[1:])
+    w = np.concatenate([[0.0], np.cumsum(counts)])
+    m = np.concatenate([[0.0], np.cumsum(counts * centers)])
+    best, pair = -1.0, (1, 2)
+    for a in range(1, bins - 1):
+        for b in range(a + 1, bins):
+            score = 0.0
+            for lo, hi in ((0, a), (a, b), (b, bins)):
+                wk = w[hi] - w[lo]
+                if wk > 0:
+                    score += (m[hi] - m[lo]) ** 2 / wk
+            if score > best:
+                best, pair = score, (a, b)
+    return float(edges[pair[0]]), float(edges[pair[1]])
+
+
+def _plain_source(t1: Image, extra: dict[str, np.ndarray] | None = None) -> Fields:
+    """A source without tissue fractions: the head mask and the Otsu classes of its foreground."""
+    mask = _largest_filled(t1.data > otsu_threshold(t1.data))
+    return Fields(t1, {"t1": t1.data, "mask": mask.astype(np.float64), **(extra or {})},
+                  multi_otsu(t1.data[mask]))
+
+
+def _mni_file(name: str) -> Path:
+    import nilearn
+
+    return Path(nilearn.__file__).parent / "datasets" / "data" / f"mni_icbm152_{name}_tal_nlin_sym_09a_converted.nii.gz"
+
+
+@lru_cache(maxsize=None)
+def mni_source(spacing: float) -> Fields:
+    """The MNI152 2009a T1 with its tissue fractions, at 1, 1.5 or 2 mm (linear resampling), as floats."""
+    import SimpleITK as sitk
+
+    t1 = sitk.Cast(sitk.ReadImage(str(_mni_file("t1"))), sitk.sitkFloat32)
+    mask = sitk.GetImageFromArray(ndimage.binary_fill_holes(sitk.GetArrayFromImage(t1) > 0).astype(np.float32))
+    mask.CopyInformation(t1)
+    images = {"t1": t1, "mask": mask}
+    for name in ("gm", "wm"):
+        images[name] = sitk.Cast(sitk.ReadImage(str(_mni_file(name))), sitk.sitkFloat32) / 255.0
+    if spacing != 1:
+        f = spacing / t1.GetSpacing()[0]
+        size = [int(n // f) for n in t1.GetSize()]
+        origin = t1.TransformContinuousIndexToPhysicalPoint([(f - 1.0) / 2.0] * 3)
+        images = {k: sitk.Resample(v, size, sitk.Transform(), sitk.sitkLinear, origin, (float(spacing),) * 3,
+                                   t1.GetDirection(), 0.0, sitk.sitkFloat32) for k, v in images.items()}
+    ref = images["t1"]
+    maps = {k: sitk.GetArrayFromImage(v).astype(np.float64) for k, v in images.items()}
+    maps["mask"] = np.clip(maps["mask"], 0.0, 1.0)
+    maps["csf"] = np.clip(maps["mask"] - maps["gm"] - maps["wm"], 0.0, 1.0)
+    grid = Image(maps["t1"], ref.GetSpacing(), ref.GetOrigin(), np.array(ref.GetDirection()).reshape(3, 3),
+                 f"mni{spacing:g}mm", str(_mni_file("t1")))
+    return Fields(grid, maps)
+
+
+def anatomical_path() -> Path | None:
+    root = os.environ.get("TOPOMATCH_DATA_ROOT")
+    path = Path(root) / "images" / "nibabel_testdata" / "anatomical.nii" if root else None
+    return path if path is not None and path.is_file() else None
+
+
+@lru_cache(maxsize=None)
+def volume_source(name: str) -> Fields | None:
+    """A 3D source by name (None: not available here)."""
+    if name == "mni":
+        return mni_source(2)
+    if name == "mni15":
+        return mni_source(1.5)
+    if name == "kmeans":
+        return _plain_source(read_image(ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz"))
+    if name == "anatomical":
+        path = anatomical_path()
+        return _plain_source(read_image(path)) if path else None
+    raise KeyError(name)
+
+
+@lru_cache(maxsize=None)
+def itk_source() -> Fields:
+    """The ITK T1 slice, with the PD slice of the same section as its ``pd`` map."""
+    pd = read_image(ITK_DIR / "BrainProtonDensitySlice.png").data
+    return _plain_source(read_image(ITK_DIR / "BrainT1Slice.png"), {"pd": pd})
+
+
+PLANE_AXIS = {"axial": 0, "coronal": 1, "sagittal": 2}
+"""The array axis (k, j, i) a plane's sections are taken across."""
+
+
+def mni_section(plane: str, section: dict) -> Fields:
+    """A 2D section of the MNI maps: at ``section['position']`` of the brain's extent, ``section['spacing']`` mm,
+    framed as is, cropped or padded (``section['frame']``)."""
+    vol = mni_source(int(section["spacing"]))
+    axis = PLANE_AXIS[plane]
+    area = (vol.maps["mask"] > 0.5).sum(axis=tuple(a for a in range(3) if a != axis))
+    present = np.flatnonzero(area >= 0.05 * area.max())
+    index = int(present[0] + round(section["position"] * (present[-1] - present[0])))
+    maps = {k: np.take(v, index, axis=axis) for k, v in vol.maps.items()}
+    if plane != "axial":  # rows are k (inferior first): show the head up
+        maps = {k: v[::-1] for k, v in maps.items()}
+    frame = section["frame"]
+    if frame in ("crop", "tight"):
+        shape = maps["t1"].shape
+        keep = [max(8, int(round(f * n))) for f, n in zip(section["crop_fractions"], shape)]
+        start = [int(round(s * (n - k))) for s, n, k in zip(section["crop_starts"], shape, keep)]
+        maps = {k: v[start[0]: start[0] + keep[0], start[1]: start[1] + keep[1]] for k, v in maps.items()}
+    elif frame == "pad":
+        top, bottom, left, right = section["pads"]
+        maps = {k: np.pad(v, ((top, bottom), (left, right))) for k, v in maps.items()}
+    maps = {k: np.ascontiguousarray(v) for k, v in maps.items()}
+    grid = Image(maps["t1"], (float(section["spacing"]),) * 2, None, None, f"mni-{plane}{index}",
+                 f"section {index} ({plane}) of {vol.grid.source}")
+    return Fields(grid, maps)
+
+
+def source_fields(spec: "CaseSpec") -> Fields:
+    """The fields of a case's source (its MNI section for the 2D MNI sources)."""
+    if spec.dim == 3:
+        fields = volume_source(spec.source)
+        if fields is None:
+            raise FileNotFoundError(f"source {spec.source} is not available (set TOPOMATCH_DATA_ROOT)")
+        return fields
+    if spec.source == "itk":
+        return itk_source()
+    return mni_section(spec.source.split("-", 1)[1], spec.section)
+
+
+def source_available(source: str) -> bool:
+    return source != "anatomical" or anatomical_path() is not None
+
+
+# ---------------------------------------------------------------------------------------------------- case plans
+
+
+@dataclass(frozen=True)
+class CaseSpec:
+    """Everything drawn for one case (cheap, JSON-able); :func:`build_case` makes the images from it.
+
+    ``truth`` is T's parameters in SimpleITK's order (radians, then the translation) about the fixed grid's
+    centre, which :func:`build_case` supplies."""
+
+    id: str
+    split: str
+    dim: int
+    source: str
+    index: int
+    seed: int
+    kind: str
+    swapped: bool
+    truth: tuple[float, ...]
+    noise_fixed: float
+    noise_moving: float
+    bias: dict | None
+    thick: bool
+    crop: dict | None
+    contrast_jitter: tuple[float, float, float]
+    dilation: int
+    threshold_percentile: float
+    saturation_percentile: float
+    section: dict | None = None
+
+    def degradations(self) -> list[str]:
+        """Short names of what was done to the case besides the transform and the noise."""
+        out = ["swapped"] if self.swapped else []
+        out += (["bias"] if self.bias else []) + (["thick"] if self.thick else []) + (["crop"] if self.crop else [])
+        if self.section is not None:
+            out.append(f"{self.section['spacing']}mm-{self.section['frame']}")
+        return out
+
+
+def plan_case(split: str, source: str, dim: int, index: int, place: int) -> CaseSpec:
+    """Case ``index`` of (split, source, dim); ``place`` is the source's position in its split (kind rotation).
+
+    The draws come in one fixed order whatever the kind, from ``default_rng([seed, index])``."""
+    seed = SEEDS[split, source, dim]
+    rng = np.random.default_rng([seed, index])
+    kinds = KINDS[split]
+    kind = kinds[(index + place) % len(kinds)]
+    swapped = kind in SWAPPABLE and (index + place) // len(kinds) % 3 == 1  # the 2nd, 5th, 8th ... of its kind
+    truth = random_transform(rng, (0.0,) * dim, max_angle=MAX_ANGLE[dim], max_translation=MAX_TRANSLATION)
+    noise_fixed, noise_moving = (float(v) for v in rng.uniform(0.01, 0.03, size=2))
+    bias_on, bias_amplitude, bias_coefficients = rng.uniform() < 0.5, float(rng.uniform(0.1, 0.2)), rng.normal(size=9)
+    thick = bool(rng.uniform() < 0.3) and dim == 3
+    crop_on, crop_axis = rng.uniform() < 0.25, int(rng.integers(0, dim))
+    crop_fraction, crop_start = float(rng.uniform(0.6, 0.8)), float(rng.uniform())
+    jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
+    dilation = int(rng.integers(0, 4))
+    threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
+    frames = ["as-is", "crop", "pad"] + (["tight"] if split in ("confirm", "holdout") else [])
+    position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
+    crop_fractions, crop_starts = rng.uniform(0.7, 0.9, size=2), rng.uniform(size=2)
+    if frame == "tight":  # 45-60 % per axis: the brain fills most of the grid's border
+        crop_fractions = 0.45 + 0.75 * (crop_fractions - 0.7)
+    pads = rng.integers(5, 41, size=4)
+    section = None
+    if source.startswith("mni-"):
+        section = {"position": position, "spacing": spacing, "frame": frame}
+        if frame in ("crop", "tight"):
+            section.update(crop_fractions=[float(v) for v in crop_fractions],
+                           crop_starts=[float(v) for v in crop_starts])
+        elif frame == "pad":
+            section.update(pads=[int(v) for v in pads])
+    return CaseSpec(
+        id=f"{split}-{dim}d-{source}-{index:03d}", split=split, dim=dim, source=source, index=index, seed=seed,
+        kind=kind, swapped=swapped, truth=tuple(float(v) for v in truth.parameters),
+        noise_fixed=noise_fixed, noise_moving=noise_moving,
+        bias={"amplitude": bias_amplitude, "coefficients": [float(c) for c in bias_coefficients]} if bias_on else None,
+        thick=thick,
+        crop={"axis": crop_axis, "fraction": crop_fraction, "start": crop_start} if crop_on else None,
+        contrast_jitter=jitter, dilation=dilation, threshold_percentile=threshold_percentile,
+        saturation_percentile=saturation_percentile, section=section)
+
+
+def plan_split(split: str, dim: int, scale: float = 1.0) -> list[CaseSpec]:
+    """The cases of a split and dimension, round-robin over its sources (unavailable sources left out)."""
+    per_source = []
+    for place, (source, n) in enumerate(SPLITS[split].get(dim, [])):
+        if source_available(source):
+            count = max(1, int(round(n * scale)))
+            per_source.append([plan_case(split, source, dim, i, place) for i in range(count)])
+    out = []
+    for i in range(max((len(c) for c in per_source), default=0)):
+        out += [cases[i] for cases in per_source if i < len(cases)]
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- case images
+
+
+class Degrade:
+    """The intensity degradations of one image: a multiplicative bias field and Gaussian noise."""
+
+    def __init__(self, grid: Image, noise: float, rng: np.random.Generator, bias: dict | None = None):
+        self.noise_level, self.rng = noise, rng
+        self.field = bias_field(grid.shape, bias["coefficients"], bias["amplitude"]) if bias else None
+
+    def bias(self, data: np.ndarray) -> np.ndarray:
+        return data if self.field is None else data * self.field
+
+    def noise(self, data: np.ndarray) -> np.ndarray:
+        """Gaussian noise of ``noise_level`` times the range (99.5th percentile minus minimum: outliers aside)."""
+        scale = float(np.quantile(data, 0.995) - data.min()) or float(data.max() - data.min())
+        return data + self.rng.normal(0.0, self.noise_level * scale, data.shape) if self.noise_level > 0 else data
+
+
+def bias_field(shape: tuple[int, ...], coefficients, amplitude: float) -> np.ndarray:
+    """``1 + amplitude * f`` with ``f`` the quadratic of the grid's coordinates (each in [-1, 1]) with these
+    coefficients (linear terms, then the products), scaled to max |f| = 1."""
+    axes = np.meshgrid(*[np.linspace(-1.0, 1.0, n) for n in shape], indexing="ij")
+    terms = list(axes) + [axes[a] * axes[b] for a in range(len(axes)) for b in range(a, len(axes))]
+    f = sum(c * t for c, t in zip(coefficients, terms))
+    return 1.0 + amplitude * f / max(float(np.abs(f).max()), 1e-12)
+
+
+PD_LEVELS = (0.0, 0.1, 1.0, 0.93, 0.86, 0.78, 0.8, 0.8)
+"""PD-like levels for ``misalign.tissue_contrast`` (a compressed T2: CSF brightest, white matter 22 % darker)."""
+
+
+def pd_like(data: np.ndarray) -> np.ndarray:
+    """A PD-like contrast of a T1-weighted image (sources without a real PD image or tissue fractions)."""
+    return tissue_contrast(data, PD_LEVELS)
+
+
+def _foreground(f: Fields) -> np.ndarray:
+    return f.maps["mask"] > 0.5
+
+
+def _contrast(f: Fields, values, jitter) -> np.ndarray:
+    return CONTRAST_SCALE * sum(f.maps[t] * v * j for t, v, j in zip(TISSUES, values, jitter))
+
+
+def kind_t1(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The same contrast."""
+    return deg.noise(deg.bias(f.maps["t1"]))
+
+
+def kind_t2(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """T2-like: CSF bright, GM mid, WM dark (fractions), or ``misalign.t2_like``."""
+    data = _contrast(f, T2_VALUES, spec.contrast_jitter) if f.has_fractions else t2_like(f.maps["t1"])
+    return deg.noise(deg.bias(data))
+
+
+def kind_pd(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """PD-like: CSF > GM > WM, compressed (fractions), the real PD slice, or :func:`pd_like`."""
+    if f.has_fractions:
+        data = _contrast(f, PD_VALUES, spec.contrast_jitter)
+    else:
+        data = f.maps["pd"] if "pd" in f.maps else pd_like(f.maps["t1"])
+    return deg.noise(deg.bias(data))
+
+
+def kind_labels(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """0 background, 1 CSF, 2 GM, 3 WM (largest fraction; without fractions the Otsu classes of the T1)."""
+    inside = _foreground(f)
+    if f.has_fractions:
+        cls = 1 + np.argmax(np.stack([f.maps[t] for t in TISSUES]), axis=0)
+    else:
+        a, b = f.classes
+        cls = 1 + (f.maps["t1"] > a).astype(int) + (f.maps["t1"] > b).astype(int)
+    return np.where(inside, cls, 0).astype(np.float64)
+
+
+def kind_silhouette(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The brain or head mask at one value, dilated by ``spec.dilation`` voxels (0: not), plus noise."""
+    mask = _foreground(f)
+    if spec.dilation >= 1:  # iterations=0 would dilate until nothing changes
+        mask = ndimage.binary_dilation(mask, iterations=spec.dilation)
+    return deg.noise(mask.astype(np.float64))
+
+
+def kind_threshold(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The T1 (bias and noise included) above a percentile of its foreground: binary 0 / 1."""
+    t1 = deg.noise(deg.bias(f.maps["t1"]))
+    level = np.percentile(t1[_foreground(f)], spec.threshold_percentile)
+    return (t1 > level).astype(np.float64)
+
+
+def kind_saturated(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The T1 clipped at a low percentile of its foreground (near uniform inside the object), plus noise."""
+    t1 = deg.bias(f.maps["t1"])
+    return deg.noise(np.minimum(t1, np.percentile(t1[_foreground(f)], spec.saturation_percentile)))
+
+
+def kind_inverted(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The T1 turned negative (its maximum minus it): a bright background, dark white matter."""
+    t1 = deg.bias(f.maps["t1"])
+    return deg.noise(float(t1.max()) - t1)
+
+
+def kind_gamma(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
+    """The T1 through a power law (gamma drawn in [0.3, 3] from the case's contrast jitter): monotonic, non-linear."""
+    t1 = deg.bias(f.maps["t1"])
+    gamma = 0.3 * 10.0 ** ((spec.contrast_jitter[0] - 0.9) / 0.2)  # 0.9 ... 1.1 -> 0.3 ... 3
+    return deg.noise(CONTRAST_SCALE * (np.clip(t1, 0.0, None) / max(float(t1.max()), 1e-12)) ** gamma)
+
+
+KIND_MAKERS: dict[str, Callable[[Fields, CaseSpec, Degrade], np.ndarray]] = {
+    "t1": kind_t1, "t2": kind_t2, "pd": kind_pd, "labels": kind_labels, "silhouette": kind_silhouette,
+    "threshold": kind_threshold, "saturated": kind_saturated, "inverted": kind_inverted, "gamma": kind_gamma}
+
+CUBIC_MAPS = ("t1", "pd")
+
+
+def maps_needed(kind: str, f: Fields) -> set[str]:
+    """The maps a kind reads (only those are moved: a 3D map costs ~1 s to resample)."""
+    tissues = set(TISSUES) if f.has_fractions else {"t1"}
+    needs = {"t1": {"t1"}, "t2": tissues, "pd": set(TISSUES) if f.has_fractions else {"pd" if "pd" in f.maps else "t1"},
+             "labels": tissues | {"mask"}, "silhouette": {"mask"}, "threshold": {"t1", "mask"},
+             "saturated": {"t1", "mask"}, "inverted": {"t1"}, "gamma": {"t1"}}[kind]
+    return needs | {"t1"}  # the T1 is the grid's data
+
+
+def moved_fields(f: Fields, truth: RigidTransform, names: set[str]) -> Fields:
+    """The maps ``names`` moved by T on the source's grid: ``map(T^-1(q))`` (cubic for T1/PD, linear for the
+    fractions and the mask), the map's minimum where ``T^-1(q)`` leaves the grid."""
+    maps = sample_maps(f, names, f.grid, truth.inverse(), cubic=CUBIC_MAPS)
+    return f.on(f.grid.with_data(maps["t1"]), maps)
+
+
+def sample_maps(f: Fields, names, reference: Image, transform: RigidTransform, cubic=()) -> dict[str, np.ndarray]:
+    """The maps ``names`` of ``f`` at ``transform(p)`` for the pixels p of ``reference`` (the map's minimum outside
+    its grid): the values of ``interpolation.resample`` (N-linear, or its clipped cubic B-spline for ``cubic``),
+    by scipy's ``map_coordinates`` computed once per case (4x faster on a 3D map)."""
+    index = f.grid.continuous_index(transform.apply(reference.points())).T  # (d, n), ITK order
+    inside = ((index >= 0) & (index <= (np.asarray(f.grid.size) - 1.0)[:, None])).all(axis=0).reshape(reference.shape)
+    maps = {}
+    for k, v in f.maps.items():
+        if k in names:
+            values = ndimage.map_coordinates(v, index[::-1], order=3 if k in cubic else 1, mode="nearest")
+            maps[k] = np.where(inside, np.clip(values.reshape(reference.shape), v.min(), v.max()), float(v.min()))
+    return maps
+
+
+def thick_slices(f: Fields) -> Fields:
+    """Every map as 4 mm slices along the third axis: a Gaussian along it (4 mm FWHM beyond the native
+    thickness), then linear resampling to a grid of 4 mm slice spacing (same origin and direction)."""
+    s = f.grid.spacing
+    sigma_mm = math.sqrt(max(THICK_SLICE_MM ** 2 - s[2] ** 2, 0.0)) / 2.3548
+    n_new = int((f.grid.size[2] - 1) * s[2] // THICK_SLICE_MM) + 1
+    ref = Image(np.zeros((n_new,) + f.grid.shape[1:]), (s[0], s[1], THICK_SLICE_MM), f.grid.origin, f.grid.direction)
+    smooth = f.on(f.grid, {k: ndimage.gaussian_filter1d(v, sigma_mm / s[2], axis=0, mode="nearest")
+                           if sigma_mm > 0 else v for k, v in f.maps.items()})
+    maps = sample_maps(smooth, set(f.maps), ref, RigidTransform.identity(f.grid.center))
+    return f.on(ref.with_data(maps["t1"]), maps)
+
+
+@dataclass(frozen=True, eq=False)
+class Case:
+    """A built case: its spec, the two images and the true T (about the fixed grid's centre)."""
+
+    spec: CaseSpec
+    fixed: Image
+    moving: Image
+    truth: RigidTransform
+
+
+def build_case(spec: CaseSpec) -> Case:
+    """The fixed and moving images of a case, and T about the fixed grid's centre."""
+    src = source_fields(spec)
+    rng = np.random.default_rng([spec.seed, spec.index, 1])
+    truth = RigidTransform(spec.truth, tuple(src.grid.center))
+    fixed_kind, moving_kind = ((spec.kind, "t1") if spec.swapped else ("t1", spec.kind))
+    fixed_data = KIND_MAKERS[fixed_kind](src, spec, Degrade(src.grid, spec.noise_fixed, rng))
+    fixed = src.grid.with_data(fixed_data, name=f"{spec.id}_fixed", source=src.grid.source)
+    mov = moved_fields(src, truth, maps_needed(moving_kind, src))
+    if spec.thick:
+        mov = thick_slices(mov)
+    noise = 0.0 if moving_kind == "labels" else spec.noise_moving
+    moving = mov.grid.with_data(KIND_MAKERS[moving_kind](mov, spec, Degrade(mov.grid, noise, rng, spec.bias)),
+                                name=f"{spec.id}_moving", source=src.grid.source)
+    if spec.crop:
+        moving = crop_slab(moving, spec.crop["axis"], spec.crop["fraction"], spec.crop["start"])
+    return Case(spec, fixed, moving, truth)
+
+
+def write_image(image: Image, path: Path) -> None:
+    """A float32 NIfTI with the image's spacing, origin and direction."""
+    import SimpleITK as sitk
+
+    out = sitk.GetImageFromArray(np.ascontiguousarray(image.data, dtype=np.float32))
+    out.SetSpacing(image.spacing)
+    out.SetOrigin(image.origin)
+    out.SetDirection(tuple(image.direction.ravel()))
+    sitk.WriteImage(out, str(path))
+
+
+def write_case(case: Case, folder: Path) -> tuple[Path, Path, Image, Image]:
+    """Write the case's two files and read them back (every method then sees the same float32 images)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    fixed_path, moving_path = folder / f"{case.spec.id}_fixed.nii.gz", folder / f"{case.spec.id}_moving.nii.gz"
+    write_image(case.fixed, fixed_path)
+    write_image(case.moving, moving_path)
+    fixed, moving = read_image(fixed_path), read_image(moving_path)
+    for a, b in ((fixed, case.fixed), (moving, case.moving)):
+        if a.shape != b.shape or not np.allclose(a.physical(np.zeros((1, a.dim))), b.physical(np.zeros((1, b.dim))),
+                                                  atol=1e-3) or not np.allclose(a.index_matrix, b.index_matrix,
+                                                                                atol=1e-5):
+            raise RuntimeError(f"{case.spec.id}: the NIfTI file does not keep the geometry")
+    return fixed_path, moving_path, fixed, moving
+
+
+# ---------------------------------------------------------------------------------------------------- methods
+
+
+@dataclass
+class Result:
+    """One method's answer on one case."""
+
+    transform: RigidTransform | None
+    ok: bool
+    seconds: float
+    flags: list[str] = field(default_factory=list)
+    reason: str = ""
+    error: str = ""
+    measures: dict = field(default_factory=dict)
+
+
+PARAMS: dict = {}
+"""Overrides of the ``register`` stage's parameters (``--params``, for tuning on the tune split only; empty: the
+defaults, as a user runs them)."""
+
+
+def run_ours(metric: str, fixed_path: Path, moving_path: Path, fixed: Image, moving: Image) -> Result:
+    """``topomatch.register`` from the files, as a user runs it (wall time of the call)."""
+    import topomatch
+    from topomatch.registration import register_with
+
+    t0 = time.perf_counter()
+    try:
+        if PARAMS:
+            out = register_with(str(fixed_path), str(moving_path),
+                                {"register": {**PARAMS, "metric": {**PARAMS.get("metric", {}), "name": metric}}})
+        else:
+            out = topomatch.register(str(fixed_path), str(moving_path), metric=metric)
+    except Exception as exc:  # noqa: BLE001 (a crash is a result to record)
+        return Result(None, False, time.perf_counter() - t0, ["exception"], error=f"{type(exc).__name__}: {exc}")
+    seconds = time.perf_counter() - t0
+    return Result(out.registration.transform, bool(out.ok), seconds, list(out.flags), out.reason or "",
+                  measures=dict(out.registration.measures))
+
+
+def elastix_available() -> bool:
+    try:
+        import itk
+
+        return hasattr(itk, "elastix_registration_method")
+    except ImportError:
+        return False
+
+
+def _to_itk(image: Image):
+    import itk
+
+    out = itk.image_from_array(np.ascontiguousarray(image.data, dtype=np.float32))
+    out.SetSpacing([float(s) for s in image.spacing])
+    out.SetOrigin([float(o) for o in image.origin])
+    out.SetDirection(itk.matrix_from_array(np.ascontiguousarray(image.direction, dtype=np.float64)))
+    return out
+
+
+def run_elastix(fixed_path: Path, moving_path: Path, fixed: Image, moving: Image) -> Result:
+    """elastix's default rigid parameter map, unchanged (EulerTransform, AdvancedMattesMI, ASGD, 4 levels)."""
+    import itk
+
+    t0 = time.perf_counter()
+    try:
+        po = itk.ParameterObject.New()
+        po.AddParameterMap(po.GetDefaultParameterMap("rigid"))
+        _, tp = itk.elastix_registration_method(_to_itk(fixed), _to_itk(moving), parameter_object=po,
+                                                log_to_console=False)
+        m = tp.GetParameterMap(0)
+        if "ComputeZYX" in m and m["ComputeZYX"][0] == "true":  # (the 2D map has no such key)
+            raise RuntimeError("elastix used ComputeZYX: its angles are not SimpleITK's")
+        transform = RigidTransform(tuple(float(v) for v in m["TransformParameters"]),
+                                   tuple(float(v) for v in m["CenterOfRotationPoint"])).with_center(fixed.center)
+    except Exception as exc:  # noqa: BLE001
+        return Result(None, False, time.perf_counter() - t0, ["exception"],
+                      error=f"{type(exc).__name__}: {str(exc).strip()[-300:]}")
+    return Result(transform, True, time.perf_counter() - t0)
+
+
+def run_simpleitk(fixed_path: Path, moving_path: Path, fixed: Image, moving: Image) -> Result:
+    """SimpleITK's Mattes MI set-up of ``simpleitk_reference`` (its 3D parameters for volumes)."""
+    from topomatch.stages.registration.simpleitk_reference import SimpleITK3DParams, SimpleITKParams, sitk_register
+
+    t0 = time.perf_counter()
+    try:
+        reg = sitk_register(fixed, moving, SimpleITK3DParams() if fixed.dim == 3 else SimpleITKParams())
+    except Exception as exc:  # noqa: BLE001
+        return Result(None, False, time.perf_counter() - t0, ["exception"], error=f"{type(exc).__name__}: {exc}")
+    return Result(reg.transform, bool(reg.ok), time.perf_counter() - t0, [f.check for f in reg.flags], reg.reason)
+
+
+def method_runners(methods: list[str], metrics: list[str]) -> dict[str, Callable[..., Result]]:
+    """Method name -> runner(fixed_path, moving_path, fixed, moving), in the order they run."""
+    out: dict[str, Callable[..., Result]] = {}
+    if "ours" in methods:
+        for m in metrics:
+            out[f"ours-{m}"] = lambda *a, m=m: run_ours(m, *a)
+    if "elastix" in methods:
+        if elastix_available():
+            out["elastix"] = run_elastix
+        else:
+            print("itk-elastix is not installed: elastix skipped", flush=True)
+    if "simpleitk" in methods:
+        out["simpleitk"] = run_simpleitk
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- scoring
+
+
+def mean_tre(estimate: RigidTransform, truth: RigidTransform, fixed: Image) -> float:
+    """Mean ``|T_est(p) - T_true(p)|`` over ``evaluate.tre_points(fixed)``."""
+    return float(np.mean(target_registration_error(estimate, truth, tre_points(fixed))))
+
+
+def named(t: RigidTransform) -> dict[str, float]:
+    """Parameters by name, angles in degrees."""
+    return {n: _finite(round(float(v), 6)) for n, v in zip(t.names, (*t.angles_deg, *t.translation))}
+
+
+def score(case: Case, fixed: Image, method: str, result: Result) -> dict:
+    """One row of the corpus: the case, the method's answer and its TRE."""
+    spec = case.spec
+    truth = case.truth.with_center(fixed.center)
+    est = result.transform.with_center(fixed.center) if result.transform is not None else None
+    tre = _finite(mean_tre(est, truth, fixed)) if est is not None else None  # None: no answer (wrong)
+    return {"case": spec.id, "split": spec.split, "dim": spec.dim, "source": spec.source, "kind": spec.kind,
+            "swapped": spec.swapped, "degradations": spec.degradations(), "method": method,
+            "truth": named(truth), "estimate": named(est) if est is not None else None, "center": list(fixed.center),
+            "tre": tre, "ok": result.ok, "flags": result.flags, "reason": result.reason, "error": result.error,
+            "measures": {k: _finite(v) for k, v in result.measures.items()}, "seconds": round(result.seconds, 4),
+            "unit": max(fixed.spacing) if spec.dim == 2 else 1.0}
+
+
+def correct(row: dict) -> bool:
+    return row["tre"] is not None and row["tre"] <= SUCCESS_TRE * row.get("unit", 1.0)
+
+
+def subsets(row: dict) -> list[str]:
+    """The summary subsets a row belongs to."""
+    out = ["all", f"kind:{row['kind']}", f"source:{row['source']}"]
+    return out + [f"deg:{d}" for d in row["degradations"] if d in ("swapped", "crop", "thick")]
+
+
+def _finite(x: float) -> float | None:
+    """``x``, or None (JSON null) when it is not finite (a median over failed runs, a NaN answer)."""
+    return x if math.isfinite(x) else None
+
+
+def summarise(rows: list[dict]) -> dict:
+    """Counts per split x dim x subset x method, and per split x dim the cases ours gets wrong where elastix is
+    right."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        for s in subsets(r):
+            groups.setdefault((r["split"], r["dim"], s, r["method"]), []).append(r)
+    table = []
+    for (split, dim, subset, method), rs in groups.items():
+        tres = [r["tre"] if r["tre"] is not None else math.inf for r in rs]
+        table.append({"split": split, "dim": dim, "subset": subset, "method": method, "cases": len(rs),
+                      "within_1": sum(correct(r) for r in rs), "median_tre": _finite(statistics.median(tres)),
+                      "median_seconds": statistics.median(r["seconds"] for r in rs),
+                      "false_flags": sum(correct(r) and not r["ok"] for r in rs),
+                      "flagged_wrong": sum(not correct(r) and not r["ok"] for r in rs),
+                      "silent_wrong": sum(not correct(r) and r["ok"] for r in rs)})
+    order = {"all": 0, "kind": 1, "source": 2, "deg": 3}
+    table.sort(key=lambda t: (SPLIT_ORDER[t["split"]], t["dim"], order[t["subset"].split(":")[0]], t["subset"],
+                              t["method"]))
+    by_case: dict[str, dict[str, dict]] = {}
+    for r in rows:
+        by_case.setdefault(r["case"], {})[r["method"]] = r
+    versus = []
+    for split, dim in sorted({(r["split"], r["dim"]) for r in rows}, key=lambda k: (SPLIT_ORDER[k[0]], k[1])):
+        for method in sorted({r["method"] for r in rows if r["method"].startswith("ours-")}):
+            both = [c for c in by_case.values() if method in c and "elastix" in c
+                    and c[method]["split"] == split and c[method]["dim"] == dim]
+            lost = [c[method]["case"] for c in both if correct(c["elastix"]) and not correct(c[method])]
+            won = [c[method]["case"] for c in both if correct(c[method]) and not correct(c["elastix"])]
+            versus.append({"split": split, "dim": dim, "method": method, "cases": len(both),
+                           "elastix_right_ours_wrong": len(lost), "ours_right_elastix_wrong": len(won),
+                           "elastix_right_ours_wrong_cases": lost})
+    return {"table": table, "versus_elastix": versus}
+
+
+def print_summary(summary: dict) -> None:
+    head = (f"{'split':7s} {'dim':>3s} {'subset':22s} {'method':10s} {'cases':>5s} {'within1':>7s} {'medTRE':>8s} "
+            f"{'med_s':>7s} {'falseflag':>9s} {'flagwrong':>9s} {'silentwrong':>11s}")
+    print(head)
+    print("-" * len(head))
+    last = None
+    for t in summary["table"]:
+        key = (t["split"], t["dim"], t["subset"])
+        if last is not None and key[:2] != last[:2]:
+            print()
+        last = key
+        median_tre = t["median_tre"] if t["median_tre"] is not None else math.inf
+        print(f"{t['split']:7s} {t['dim']:>3d} {t['subset']:22s} {t['method']:10s} {t['cases']:5d} {t['within_1']:7d} "
+              f"{median_tre:8.3f} {t['median_seconds']:7.2f} {t['false_flags']:9d} {t['flagged_wrong']:9d} "
+              f"{t['silent_wrong']:11d}")
+    if summary["versus_elastix"]:
+        print("\nelastix right (TRE <= 1), ours wrong (and the reverse):")
+        for v in summary["versus_elastix"]:
+            print(f"  {v['split']:7s} {v['dim']}D {v['method']:10s} {v['elastix_right_ours_wrong']:3d} of {v['cases']} "
+                  f"(ours right, elastix wrong: {v['ours_right_elastix_wrong']})"
+                  + (f"  {', '.join(v['elastix_right_ours_wrong_cases'][:8])}" if v["elastix_right_ours_wrong_cases"]
+                     else ""))
+
+
+# ---------------------------------------------------------------------------------------------------- runner
+
+
+def selected_cases(args) -> list[CaseSpec]:
+    """The cases of the chosen splits and dimensions, filtered by kind and source, ``--limit`` per split and dim."""
+    out = []
+    for split in (list(SPLIT_ORDER) if args.split == "all" else [args.split]):
+        for dim in args.dims:
+            cases = [c for c in plan_split(split, dim, args.cases_scale)
+                     if (not args.kinds or c.kind in args.kinds) and (not args.sources or c.source in args.sources)]
+            out += cases[: args.limit] if args.limit else cases
+    return out
+
+
+def list_cases(args) -> None:
+    """Print the case counts per split, dim, source and kind (nothing generated)."""
+    if anatomical_path() is None:
+        print("TOPOMATCH_DATA_ROOT not set (or anatomical.nii missing): the anatomical cases are left out")
+    cases = selected_cases(args)
+    for split in sorted({c.split for c in cases}, key=SPLIT_ORDER.get):
+        for dim in sorted({c.dim for c in cases if c.split == split}):
+            sub = [c for c in cases if c.split == split and c.dim == dim]
+            kinds = KINDS[split]
+            print(f"\n{split} {dim}D: {len(sub)} cases ({sum(c.swapped for c in sub)} swapped, "
+                  f"{sum(bool(c.crop) for c in sub)} cropped, {sum(c.thick for c in sub)} thick, "
+                  f"{sum(bool(c.bias) for c in sub)} with a bias field)")
+            print(f"  {'source':14s}" + "".join(f"{k:>11s}" for k in kinds) + f"{'total':>8s}")
+            for source in dict.fromkeys(c.source for c in sub):
+                row = [sum(c.source == source and c.kind == k for c in sub) for k in kinds]
+                print(f"  {source:14s}" + "".join(f"{n:11d}" for n in row) + f"{sum(row):8d}")
+
+
+def warm_up(runners: dict, cases: list[CaseSpec], folder: Path) -> None:
+    """Each method once per dimension on the first case of that dimension, untimed: one-time start-up costs
+    (ITK's lazily loaded modules for elastix, SimpleITK's import, our first call) stay out of the timings."""
+    for dim in sorted({c.dim for c in cases}):
+        spec = next(c for c in cases if c.dim == dim)
+        fp, mp, fixed, moving = write_case(build_case(spec), folder / "warm-up")
+        seen_ours = False
+        for name, run in runners.items():
+            if name.startswith("ours-"):
+                if seen_ours:
+                    continue
+                seen_ours = True
+            t0 = time.perf_counter()
+            run(fp, mp, fixed, moving)
+            print(f"warm-up {dim}D {name}: {time.perf_counter() - t0:.2f} s (start-up included, not counted)",
+                  flush=True)
+
+
+def save_json(path: Path, out: dict) -> None:
+    """Write atomically (a crash or an interrupt keeps the last complete file)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(out, indent=1, allow_nan=False))
+    tmp.replace(path)
+
+
+def _versions() -> dict:
+    out = {"python": platform.python_version(), "numpy": np.__version__}
+    for module in ("SimpleITK", "itk", "nilearn"):
+        try:
+            out[module] = __import__(module).__version__
+        except Exception:  # noqa: BLE001
+            out[module] = None
+    try:
+        out["git_commit"] = subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                                           check=False).stdout.strip()
+    except OSError:
+        out["git_commit"] = None
+    return out
+
+
+def run(args) -> None:
+    cases = selected_cases(args)
+    if anatomical_path() is None and args.dims.count(3):
+        print("TOPOMATCH_DATA_ROOT not set (or anatomical.nii missing): the anatomical cases are left out", flush=True)
+    runners = method_runners(args.methods, args.metrics)
+    if not cases or not runners:
+        print("nothing to run")
+        return
+    temp = args.cache is None
+    folder = Path(tempfile.mkdtemp(prefix="registration_corpus_")) if temp else args.cache
+    print(f"{len(cases)} cases x {len(runners)} methods ({', '.join(runners)}); case files in {folder}", flush=True)
+    out = {"about": __doc__.splitlines()[0], "command": " ".join(sys.argv), "versions": _versions(),
+           "machine": {"cpus": os.cpu_count(), "load_average_at_start": list(os.getloadavg())},
+           "options": {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
+           "success_tre": SUCCESS_TRE, "specs": {}, "rows": [], "summary": {}}
+    try:
+        warm_up(runners, cases, folder)
+        t_start = time.perf_counter()
+        for n, spec in enumerate(cases, 1):
+            case = build_case(spec)
+            fp, mp, fixed, moving = write_case(case, folder)
+            parts = []
+            for name, runner in runners.items():
+                row = score(case, fixed, name, runner(fp, mp, fixed, moving))
+                out["rows"].append(row)
+                tre = "error" if row["tre"] is None else f"{row['tre']:.2f}"
+                parts.append(f"{name} {tre} {row['seconds']:.1f}s{'' if row['ok'] else ' FLAG'}")
+            out["specs"][spec.id] = asdict(spec)
+            out["summary"] = summarise(out["rows"])
+            if args.json:
+                save_json(args.json, out)
+            desc = spec.kind + (f" [{', '.join(spec.degradations())}]" if spec.degradations() else "")
+            print(f"[{n}/{len(cases)} {time.perf_counter() - t_start:.0f}s] {spec.id} {desc} | " + " | ".join(parts),
+                  flush=True)
+            if temp:  # the files of a temporary cache are not kept
+                fp.unlink()
+                mp.unlink()
+    finally:
+        if temp:
+            shutil.rmtree(folder, ignore_errors=True)
+    out["machine"]["load_average_at_end"] = list(os.getloadavg())
+    if args.json:
+        save_json(args.json, out)
+        print(f"JSON: {args.json}")
+    print()
+    print_summary(out["summary"])
+
+
+# ---------------------------------------------------------------------------------------------------- checks
+
+
+def _aligned_correlation(case: Case, transform: RigidTransform) -> float:
+    """Correlation of the fixed image with ``moving(T(p))`` over the fixed pixels that T maps inside the moving grid."""
+    fixed, moving = case.fixed, case.moving
+    idx = moving.continuous_index(transform.apply(fixed.points()))
+    inside = ((idx >= 0) & (idx <= np.asarray(moving.size) - 1.0)).all(axis=1).reshape(fixed.shape)
+    warped = resample(moving, transform, fixed, order=1)
+    return float(np.corrcoef(fixed.data[inside], warped[inside])[0, 1])
+
+
+def selftest(args) -> None:
+    """The scoring and the case geometry, on the first case of every split, dim and source made a T1 case (uncropped,
+    not thick): the truth scores TRE 0, a known offset scores its length, and the truth warps the moving image onto
+    the fixed one (its correlation is high, above the identity's and above that of the truth one voxel off)."""
+    failures = 0
+    folder = Path(tempfile.mkdtemp(prefix="corpus_selftest_"))
+    try:
+        for split in SPLIT_ORDER:
+            for dim in (2, 3):
+                firsts = {}
+                for spec in plan_split(split, dim, 1.0):
+                    firsts.setdefault(spec.source, spec)
+                for spec in firsts.values():
+                    failures += _selftest_case(replace(spec, kind="t1", swapped=False, crop=None, thick=False), folder)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+    print("selftest passed" if not failures else f"selftest: {failures} failures")
+    if failures:
+        raise SystemExit(1)
+
+
+def _selftest_case(spec: CaseSpec, folder: Path) -> int:
+    """The checks of :func:`selftest` on one case (a T1 case, uncropped); the number of failures."""
+    dim = spec.dim
+    case = build_case(spec)
+    _, _, fixed, _ = write_case(case, folder)
+    truth = case.truth
+    tre0 = mean_tre(truth, truth, fixed)
+    offset = np.arange(1.0, dim + 1.0) * 0.7
+    shifted = RigidTransform(truth.angles + tuple(truth.translation + offset), truth.center)
+    tre_off = mean_tre(shifted.with_center(fixed.center), truth.with_center(fixed.center), fixed)
+    ok_tre = tre0 < 1e-9 and abs(tre_off - float(np.linalg.norm(offset))) < 1e-9
+    c_truth = _aligned_correlation(case, truth)
+    c_ident = _aligned_correlation(case, RigidTransform.identity(truth.center))
+    c_near = max(_aligned_correlation(case, RigidTransform(truth.angles + tuple(truth.translation + step),
+                                                           truth.center))
+                 for step in np.vstack([np.eye(dim), -np.eye(dim)]) * max(fixed.spacing))
+    ok_geom = c_truth > 0.7 and c_truth > c_ident + 0.5 * (1.0 - c_ident) and c_truth > c_near  # half the loss undone
+    print(f"{spec.id:28s} truth TRE {tre0:.1e}, offset {np.linalg.norm(offset):.4f} -> TRE {tre_off:.4f}; "
+          f"corr(fixed, moving o T) T_true {c_truth:.3f}, one voxel off {c_near:.3f}, identity {c_ident:.3f}  "
+          f"{'ok' if ok_tre and ok_geom else 'FAIL'}", flush=True)
+    return int(not ok_tre) + int(not ok_geom)
+
+
+def generate(args) -> None:
+    """Build and write every selected case (no registration): each must pass ``read_image``'s checks and keep its
+    geometry in the file."""
+    cases = selected_cases(args)
+    folder = args.cache or Path(tempfile.mkdtemp(prefix="registration_corpus_"))
+    t0, failures = time.perf_counter(), 0
+    try:
+        for n, spec in enumerate(cases, 1):
+            try:
+                fp, mp, fixed, moving = write_case(build_case(spec), folder)
+            except Exception as exc:  # noqa: BLE001
+                failures += 1
+                print(f"[{n}/{len(cases)}] {spec.id} {spec.kind}: FAILED {type(exc).__name__}: {exc}", flush=True)
+                continue
+            print(f"[{n}/{len(cases)} {time.perf_counter() - t0:.0f}s] {spec.id} {spec.kind} "
+                  f"[{', '.join(spec.degradations())}] fixed {fixed.shape} moving {moving.shape} "
+                  f"spacing {tuple(round(v, 2) for v in moving.spacing)}", flush=True)
+            if args.cache is None:
+                fp.unlink()
+                mp.unlink()
+    finally:
+        if args.cache is None:
+            shutil.rmtree(folder, ignore_errors=True)
+    print(f"{len(cases) - failures} of {len(cases)} cases generated in {time.perf_counter() - t0:.0f} s")
+    if failures:
+        raise SystemExit(1)
+
+
+def _mid(image: Image) -> np.ndarray:
+    return image.data if image.dim == 2 else image.data[image.shape[0] // 2]
+
+
+def montage(args, path: Path) -> None:
+    """A PNG: per case, the fixed image, the moving image and the moving image warped back by the truth onto the
+    fixed grid (3D: the middle slice of the third axis)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = selected_cases(args)
+    fig, axes = plt.subplots(len(cases), 3, figsize=(9, 3 * len(cases)), squeeze=False)
+    for row, spec in zip(axes, cases):
+        case = build_case(spec)
+        back = case.fixed.with_data(resample(case.moving, case.truth, case.fixed, order=1))
+        for ax, image, title in zip(row, (case.fixed, case.moving, back), ("fixed", "moving", "moving o T_true")):
+            ax.imshow(_mid(image), cmap="gray", aspect=image.spacing[1] / image.spacing[0])
+            ax.set_title(f"{title} {image.shape}", fontsize=7)
+            ax.axis("off")
+        row[0].set_ylabel(spec.id)
+        row[0].text(0, -0.18, f"{spec.id} {spec.kind} {','.join(spec.degradations())}", transform=row[0].transAxes,
+                    fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    print(f"montage of {len(cases)} cases: {path}")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--split", choices=[*SPLIT_ORDER, "all"], default="all")
+    ap.add_argument("--dims", default="2,3", help="comma-separated: 2, 3 or both")
+    ap.add_argument("--methods", default="ours,elastix,simpleitk")
+    ap.add_argument("--metrics", default="jt,jr,mi,tmi", help="our metrics (one method ours-<metric> each)")
+    ap.add_argument("--kinds", default="", help=f"only these kinds ({', '.join(KIND_MAKERS)})")
+    ap.add_argument("--sources", default="", help="only these sources")
+    ap.add_argument("--limit", type=int, default=0, help="the first N cases per split and dimension")
+    ap.add_argument("--cases-scale", type=float, default=1.0, help="multiply every source's case count")
+    ap.add_argument("--cache", type=Path, default=None, help="keep the case files here (default: a temporary folder, "
+                                                              "removed)")
+    ap.add_argument("--json", type=Path, default=None, help="write rows and summary here (after every case)")
+    ap.add_argument("--list", action="store_true", help="print the case counts and stop")
+    ap.add_argument("--selftest", action="store_true", help="check the scoring and the case geometry and stop")
+    ap.add_argument("--montage", type=Path, default=None, help="save a PNG of the selected cases and stop")
+    ap.add_argument("--generate", action="store_true", help="build and write the selected cases (no registration)")
+    ap.add_argument("--params", default="", help="JSON overrides of the register parameters (tuning, tune split only)")
+    args = ap.parse_args(argv)
+    if args.params:
+        PARAMS.update(json.loads(args.params))
+    args.dims = [int(d) for d in args.dims.split(",") if d]
+    args.methods = [m for m in args.methods.split(",") if m]
+    args.metrics = [m for m in args.metrics.split(",") if m]
+    args.kinds = [k for k in args.kinds.split(",") if k]
+    args.sources = [s for s in args.sources.split(",") if s]
+    unknown = set(args.kinds) - set(KIND_MAKERS)
+    if unknown or set(args.methods) - {"ours", "elastix", "simpleitk"} or set(args.dims) - {2, 3}:
+        ap.error(f"unknown kinds {sorted(unknown)}, or methods/dims out of {{ours, elastix, simpleitk}} / {{2, 3}}")
+    if args.list:
+        list_cases(args)
+    elif args.selftest:
+        selftest(args)
+    elif args.montage:
+        montage(args, args.montage)
+    elif args.generate:
+        generate(args)
+    else:
+        run(args)
+
+
+if __name__ == "__main__":
+    main()

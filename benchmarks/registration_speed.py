@@ -1,0 +1,109 @@
+"""``topomatch register`` as a user runs it (a fresh process: interpreter, imports, reading, registration,
+output), against elastix and SimpleITK on the same pairs, in the same run.
+
+Usage::
+
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_speed.py [--cases 20] [--json OUT]
+
+Pairs: the report split of ``benchmarks/registration_corpus.py`` (3D: its MNI, KmeansTest and anatomical
+cases; 2D: its MNI sections and ITK slices), the first ``--cases`` of each dimension, written as NIfTI files.
+Per pair, interleaved so that every method meets the same machine load:
+
+- **ours**: ``topomatch register FIXED MOVING --json`` in a new process (wall time), the defaults;
+- **elastix** (3D and 2D): ``itk.elastix_registration_method`` with its default rigid map, in this process
+  after a warm-up (ITK's module loading excluded: the issue's reference is elastix's in-process time);
+- **SimpleITK script** (2D): a new Python process that imports SimpleITK, reads both files and registers them
+  (Mattes MI, regular-step gradient descent, a 3-level pyramid: the textbook set-up), wall time.
+
+The goals (docs/registration.md): 3D, the median of ours at most elastix's in-process median; 2D, ours at most
+the SimpleITK script's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import registration_corpus as corpus  # noqa: E402  (the corpus's cases)
+
+SITK_SCRIPT = """
+import sys, SimpleITK as sitk
+f = sitk.ReadImage(sys.argv[1], sitk.sitkFloat32); m = sitk.ReadImage(sys.argv[2], sitk.sitkFloat32)
+r = sitk.ImageRegistrationMethod()
+r.SetMetricAsMattesMutualInformation(50); r.SetMetricSamplingStrategy(r.RANDOM); r.SetMetricSamplingPercentage(0.25, 42)
+r.SetInterpolator(sitk.sitkLinear)
+r.SetOptimizerAsRegularStepGradientDescent(learningRate=2.0, minStep=1e-3, numberOfIterations=300, relaxationFactor=0.5)
+r.SetOptimizerScalesFromPhysicalShift(); r.SetShrinkFactorsPerLevel([4, 2, 1]); r.SetSmoothingSigmasPerLevel([2, 1, 0])
+t = sitk.CenteredTransformInitializer(f, m, sitk.Euler2DTransform(), sitk.CenteredTransformInitializerFilter.MOMENTS)
+r.SetInitialTransform(t, inPlace=False)
+print(r.Execute(f, m).GetParameters())
+"""
+
+USER_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+
+
+def process_seconds(cmd: list[str]) -> float:
+    t = time.perf_counter()
+    subprocess.run(cmd, capture_output=True, text=True, env=USER_ENV)  # a flagged result exits 1: still timed
+    return time.perf_counter() - t
+
+
+def elastix_seconds(fixed, moving) -> float:
+    return corpus.run_elastix(None, None, fixed, moving).seconds
+
+
+def summary(values: list[float]) -> dict:
+    return {"median": statistics.median(values), "min": min(values), "n": len(values)}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", type=int, default=20, help="pairs per dimension (default 20)")
+    ap.add_argument("--dims", default="3,2")
+    ap.add_argument("--json", type=Path, default=None)
+    args = ap.parse_args()
+    out: dict = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
+                             "load_average_at_start": list(os.getloadavg())}, "dims": {}}
+    folder = Path(tempfile.mkdtemp(prefix="topomatch-speed-"))
+    script = folder / "sitk_register.py"
+    script.write_text(SITK_SCRIPT)
+    ours_cmd = [sys.executable, "-m", "topomatch", "register"]
+    for dim in (int(d) for d in args.dims.split(",")):
+        specs = [s for s in corpus.plan_split("report", dim) if corpus.source_available(s.source)][: args.cases]
+        pairs = [corpus.write_case(corpus.build_case(s), folder) for s in specs]
+        fixed_path, moving_path, fixed, moving = pairs[0]
+        corpus.run_elastix(None, None, fixed, moving)  # ITK's one-time start-up, not timed
+        process_seconds(ours_cmd + [str(fixed_path), str(moving_path), "--json"])  # bytecode written once
+        rows = {"ours (process)": [], "elastix (in process)": []}
+        if dim == 2:
+            rows["SimpleITK script (process)"] = []
+        for (fixed_path, moving_path, fixed, moving), spec in zip(pairs, specs):
+            rows["ours (process)"].append(process_seconds(ours_cmd + [str(fixed_path), str(moving_path), "--json"]))
+            rows["elastix (in process)"].append(elastix_seconds(fixed, moving))
+            if dim == 2:
+                rows["SimpleITK script (process)"].append(
+                    process_seconds([sys.executable, str(script), str(fixed_path), str(moving_path)]))
+            print(f"{dim}D {spec.id:32s} " + "  ".join(f"{k} {v[-1]:.2f} s" for k, v in rows.items()), flush=True)
+        result = {k: summary(v) for k, v in rows.items()}
+        reference = "elastix (in process)" if dim == 3 else "SimpleITK script (process)"
+        result["ratio_ours_over_reference"] = result["ours (process)"]["median"] / result[reference]["median"]
+        out["dims"][f"{dim}D"] = {"summary": result, "seconds": rows, "reference": reference}
+        print(f"== {dim}D: median ours {result['ours (process)']['median']:.3f} s, {reference} "
+              f"{result[reference]['median']:.3f} s, ratio {result['ratio_ours_over_reference']:.2f}", flush=True)
+    out["machine"]["load_average_at_end"] = list(os.getloadavg())
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()
