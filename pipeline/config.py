@@ -66,6 +66,8 @@ class PairConfig(_Strict):
     fixed: str
     moving: str
     truth: dict[str, float] | None = Field(None, description="known parameters, e.g. {tx: 13, ty: 17, angle: 0}")
+    label: str | None = Field(None, min_length=1, description="the pair's name in tables and figures, e.g. 'slice "
+                                                             "30|slice 31' (default: the two file names)")
 
 
 class PairsCsvConfig(_Strict):
@@ -411,7 +413,7 @@ def resolve_inputs_config(inputs: InputsConfig, *, base_dir: Path, data_root: Pa
     for i, pair in enumerate(inputs.pairs):
         (fixed,) = one(pair.fixed, f"inputs.pairs[{i}].fixed")[:1]
         (moving,) = one(pair.moving, f"inputs.pairs[{i}].moving")[:1]
-        units.append(InputUnit(f"{fixed.name}|{moving.name}", {"fixed_path": fixed, "moving_path": moving},
+        units.append(InputUnit(pair.label or f"{fixed.name}|{moving.name}", {"fixed_path": fixed, "moving_path": moving},
                                {"truth": pair.truth}))
     if inputs.pairs_csv is not None:
         units += _pairs_from_csv(inputs.pairs_csv, one)

@@ -55,19 +55,71 @@ def report_labels(experiment) -> list[tuple[str, Any]]:
     return labels
 
 
-def run_reports(experiment, results) -> dict[str, ReportOutput | str]:
-    """Run each configured report; a failing report is recorded as its error message."""
+def code_fingerprint() -> str:
+    """SHA-256 over the source of the engine and the stages (every report and everything a report imports
+    lives there): a report's output is reused only while no code that could draw it has changed."""
+    global _FINGERPRINT
+    if _FINGERPRINT is None:
+        import hashlib
+        from importlib.util import find_spec
+
+        # the stages' folder is located, not imported: the engine does not depend on the domains' code
+        stages = find_spec("topomatch.stages")
+        roots = [Path(__file__).parent, *map(Path, (stages.submodule_search_locations or []) if stages else [])]
+        digest = hashlib.sha256()
+        for root in roots:
+            for path in sorted([*root.rglob("*.py"), *root.rglob("*.c")]):
+                digest.update(path.relative_to(root).as_posix().encode())
+                digest.update(path.read_bytes())
+        _FINGERPRINT = digest.hexdigest()
+    return _FINGERPRINT
+
+
+_FINGERPRINT: str | None = None
+
+
+def report_key(experiment, label: str, call, results) -> str:
+    """What a report's output depends on: its name and parameters, the figure settings, every item's stage
+    cache keys and status, and the code (:func:`code_fingerprint`)."""
+    import hashlib
+
+    payload = json.dumps([label, call.name, call.params.model_dump(mode="json"), list(experiment.raw.figure_format),
+                          experiment.raw.dpi, code_fingerprint(),
+                          [(r.item_id, sorted(r.keys.items()), r.ok) for r in results]], sort_keys=True, default=str)
+    return hashlib.sha256(payload.encode()).hexdigest()
+
+
+def run_reports(experiment, results, *, reuse: dict[str, tuple[str, list[str]]] | None = None,
+                run_dir: Path | None = None) -> tuple[dict[str, ReportOutput | str], dict[str, list[str]], dict[str, str]]:
+    """Run each configured report; a failing report is recorded as its error message.
+
+    ``reuse``: {label: (key, written paths)} of the run folder's previous manifest; a report whose key is
+    unchanged and whose files are all still in ``run_dir`` is not drawn again. Returns (outputs to write,
+    reused {label: paths}, {label: key})."""
     import matplotlib
 
     matplotlib.use("Agg")
     outputs: dict[str, ReportOutput | str] = {}
+    reused: dict[str, list[str]] = {}
+    keys: dict[str, str] = {}
     for label, call in report_labels(experiment):
+        keys[label] = key = report_key(experiment, label, call, results)
+        before = (reuse or {}).get(label)
+        if before and before[0] == key and run_dir is not None and _all_present(run_dir, before[1]):
+            reused[label] = before[1]
+            continue
         spec = get_report(call.name)
         try:
             outputs[label] = spec.func(experiment, results, call.params)
         except Exception as exc:  # keep the other reports and the computed results
             outputs[label] = f"report {label} failed: {type(exc).__name__}: {exc}"
-    return outputs
+    return outputs, reused, keys
+
+
+def _all_present(run_dir: Path, paths: list[str]) -> bool:
+    """Whether a report's earlier output is complete: no error, every file there."""
+    return not any(p.startswith("ERROR: ") for p in paths) and all(
+        p.startswith("NOTE: ") or (run_dir / p).is_file() for p in paths)
 
 
 def _cell(value: Any) -> Any:

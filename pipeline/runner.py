@@ -44,6 +44,17 @@ CACHE_DIRNAME = ".cache"
 INCOMPLETE = "INCOMPLETE"
 
 
+def _previous_reports(run_dir: Path) -> dict[str, tuple[str, list[str]]]:
+    """{report label: (key, written paths)} from the run folder's last complete manifest, if any (an
+    unreadable or older manifest: nothing to reuse)."""
+    try:
+        manifest = json.loads((run_dir / "manifest.json").read_text())
+        keys, outputs = manifest.get("report_keys", {}), manifest.get("outputs", {})
+        return {label: (key, list(outputs[label])) for label, key in keys.items() if label in outputs}
+    except (OSError, ValueError, AttributeError, TypeError):
+        return {}
+
+
 @dataclass
 class RunOutcome:
     """Where a run wrote its results, and what each item produced."""
@@ -105,13 +116,15 @@ def run_experiment(
     compute_seconds = time.perf_counter() - t0
 
     write_table(run_dir / "tables", "results", [r.row() for r in results])
-    outputs = run_reports(experiment, results)
-    written = write_report_outputs(run_dir, outputs, figure_format=experiment.raw.figure_format,
-                                   dpi=experiment.raw.dpi)
+    outputs, reused, report_keys = run_reports(experiment, results, reuse=_previous_reports(run_dir), run_dir=run_dir)
+    drawn = write_report_outputs(run_dir, outputs, figure_format=experiment.raw.figure_format, dpi=experiment.raw.dpi)
+    written = {label: reused[label] if label in reused else drawn[label] for label in report_keys}
     manifest = build_manifest(
         experiment, results, started=started, compute_seconds=compute_seconds,
         total_seconds=time.perf_counter() - t0, cache_root=cache_root, outputs=written,
     )
+    manifest["report_keys"] = report_keys
+    manifest["reports_reused"] = sorted(reused)
     atomic_write_text(run_dir / "manifest.json", json.dumps(manifest, indent=2, default=str))
     write_index_html(run_dir, experiment, results, manifest, written)
     marker.unlink(missing_ok=True)

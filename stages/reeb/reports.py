@@ -101,7 +101,7 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
     rows, cols, cells = gallery_layout(results, params.columns)
     keys_height = 0.9  # inches for the colour bar and legend
     fig = plt.figure(figsize=(params.panel_size * cols, params.panel_size * rows + keys_height))
-    functions = set()
+    functions, title_lines = set(), 2
     for r, cell in zip(results, cells):
         ax = fig.add_subplot(rows, cols, cell + 1)
         label = Path(r.input_path).name.split(".")[0]
@@ -118,8 +118,9 @@ def skeleton_gallery_report(experiment, results, params: SkeletonGalleryParams) 
         # values would run into the next panel's title
         head = textwrap.fill(f"{label} ({FUNCTION_NAMES.get(kind, kind)}) {sweep}", width=int(params.panel_size * 14))
         ax.set_title(f"{head}\n{caption}", fontsize=7)
+        title_lines = max(title_lines, head.count("\n") + 1 + caption.count("\n") + 1)
     bottom = keys_height / (params.panel_size * rows + keys_height)
-    top_inches = 0.3 + 0.35 * bool(params.title)
+    top_inches = 0.12 * title_lines + 0.06 + 0.45 * bool(params.title)  # panel titles (7 pt lines), then the title
     fig.subplots_adjust(left=0, right=1, bottom=bottom, top=1 - top_inches / (params.panel_size * rows + keys_height),
                         wspace=0.02, hspace=0.18)
     if params.title:

@@ -111,6 +111,7 @@ def bernoulli_jt_report(experiment, results, params: BernoulliJTParams) -> Repor
         ax2 = fig.add_subplot(2, n, n + k + 1)
         cs = ax2.contour(p, q, jt, levels=12, cmap="viridis")
         ax2.clabel(cs, fontsize=6)
+        fig.colorbar(cs, ax=ax2, shrink=0.8, label=f"JT (alpha = {alpha:g})")
         ax2.set_xlabel("p")
         ax2.set_ylabel("q")
         ax2.set_aspect("equal")
@@ -193,10 +194,11 @@ class BarsParams(Params):
 
 @report("registration_bars", params=BarsParams)
 def registration_bars_report(experiment, results, params: BarsParams) -> ReportOutput:
-    """Figs. 2.6-2.8: recovered parameters and absolute errors per measure, per true misalignment and image."""
+    """Figs. 2.6-2.8: recovered parameters and absolute errors per measure, per true misalignment and image; with
+    several seeds (a ``register.seed`` sweep) the bars are the median over the seeds, the whiskers their range."""
     import matplotlib.pyplot as plt
 
-    data: dict[str, dict[tuple, dict[str, tuple]]] = {}
+    data: dict[str, dict[tuple, dict[str, list[tuple]]]] = {}
     for r in results:
         if not r.ok:
             continue
@@ -204,7 +206,8 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
             names = tuple(ev.truth)
             t = tuple(ev.truth[n] for n in names)
             est = tuple(ev.truth[n] + ev.errors[n] for n in names)
-            data.setdefault(_label(r), {}).setdefault(tuple(round(v, 6) for v in t), {})[ev.method] = (names, t, est, ev)
+            data.setdefault(_label(r), {}).setdefault(tuple(round(v, 6) for v in t), {}).setdefault(
+                ev.method, []).append((names, t, est, ev, r.sweep.get("register.seed")))
     figures, table = {}, []
     for image, cases in data.items():
         cols = len(cases)
@@ -212,17 +215,23 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
         for c, (key, by_method) in enumerate(cases.items()):
             methods = list(by_method)
             width = 0.8 / max(len(methods), 1)
-            names, truth = next(iter(by_method.values()))[:2]
+            names, truth = by_method[methods[0]][0][:2]
             x = np.arange(len(names))
             for m, method in enumerate(methods):
-                _, t, est, ev = by_method[method]
-                errs = [abs(e - v) for e, v in zip(est, t)]
+                runs = by_method[method]
+                est = np.array([run[2] for run in runs])                    # (seeds, parameters)
+                errs = np.abs(est - np.array(truth))
                 label = method.split("/")[-1].split("(")[0].upper()
-                axes[0][c].bar(x + (m - (len(methods) - 1) / 2) * width, est, width, label=label)
-                axes[1][c].bar(x + (m - (len(methods) - 1) / 2) * width, errs, width, label=label)
-                table.append({"input": image, **{f"true_{n}": v for n, v in zip(names, t)}, "method": method,
-                              **dict(zip(names, est)), **{f"err_{n}": e for n, e in zip(names, errs)},
-                              "tre_mean": ev.tre_mean, "success": ev.success})
+                at = x + (m - (len(methods) - 1) / 2) * width
+                for row, values in ((0, est), (1, errs)):
+                    mid = np.median(values, axis=0)
+                    spread = np.array([mid - values.min(axis=0), values.max(axis=0) - mid]) if len(runs) > 1 else None
+                    axes[row][c].bar(at, mid, width, yerr=spread, capsize=2, label=label)
+                for (_, t, e, ev, seed), err in zip(runs, errs):
+                    table.append({"input": image, **{f"true_{n}": v for n, v in zip(names, t)}, "method": method,
+                                  **({"seed": seed} if seed is not None else {}), **dict(zip(names, e)),
+                                  **{f"err_{n}": float(v) for n, v in zip(names, err)},
+                                  "tre_mean": ev.tre_mean, "success": ev.success})
             for j in range(len(names)):
                 axes[0][c].hlines(truth[j], j - 0.45, j + 0.45, colors="k", linestyles="--", lw=1)
             axes[0][c].set_xticks(x, names)
@@ -234,7 +243,9 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
         axes[0][0].set_ylabel("recovered (deg, px)")
         axes[1][0].set_ylabel("absolute error (log)")
         axes[0][-1].legend(fontsize=7)
-        fig.suptitle(f"{image}: recovered parameters and errors per measure (thesis Figs. 2.6-2.8)", fontsize=9)
+        seeds = max(len(runs) for by_method in cases.values() for runs in by_method.values())
+        fig.suptitle(f"{image}: recovered parameters and errors per measure" + (
+            f", median and range over {seeds} seeds" if seeds > 1 else "") + " (thesis Figs. 2.6-2.8)", fontsize=9)
         fig.tight_layout()
         figures[f"{params.name}_{image.replace('|', '_')}"] = fig
     return ReportOutput(tables={params.name: table}, figures=figures)
@@ -282,7 +293,7 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
         axes[k][-1].legend(fontsize=7)
     if params.title:
         fig.suptitle(params.title, fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.35 / fig.get_figheight()) if params.title else None)
     return ReportOutput(tables={params.name: table}, figures={params.name: fig})
 
 

@@ -10,8 +10,9 @@ metrics (:mod:`topomatch.stages.retrieval.metrics`), and writes:
 - ``<name>_7x7_<method>``: dissimilarities between the first model (rows) and the second model
   (columns) of seven classes, with the smallest value per row marked: a correct match is a star on
   the diagonal (thesis Tables 3.1 / 4.1);
-- ``<name>_top10_<method>``: rendered thumbnails of the top-10 results of a few queries
-  (thesis Tables 3.2 / 4.2);
+- ``<name>_top<k>_<method>``: rendered thumbnails of the top-k results of a few queries
+  (thesis Tables 3.2 / 4.2: k = 10; 3.3 / 4.3: k = 5);
+- ``<name>_samples``: the first models of every class (thesis Fig. 3.12);
 - ``<name>_ablation``: each fusion without re-ranking and without each of its parts.
 """
 
@@ -95,7 +96,14 @@ class RetrievalBenchmarkParams(MethodsParams):
                                      description="classes of the 7x7 table (one model each: the first)")
     queries: list[str] = Field(default_factory=lambda: ["human", "hand", "octopus", "plier"],
                                description="classes whose first model is a top-10 query")
-    thumbnails: bool = Field(True, description="render the top-10 grids (slow: about 1 s per thumbnail)")
+    thumbnails: bool = Field(True, description="render the top-k grids (slow: about 1 s per thumbnail)")
+    thumbnail_methods: list[str] | None = Field(None, description="methods whose top-k grids are rendered (none: "
+                                                                  "every method and fusion)")
+    top_k: list[Annotated[int, Field(ge=1, le=20)]] = Field(default_factory=lambda: [10], description=(
+        "lengths of the rendered rankings: one grid <name>_top<k>_<method> per k (thesis: 10 for McGill, 5 for "
+        "Princeton)"))
+    samples_per_class: Annotated[int, Field(ge=0, le=5)] = Field(0, description=(
+        "render <name>_samples: the first n models of every class (thesis Fig. 3.12: two per class); 0: none"))
 
 
 def _labels(experiment, template: str) -> dict[str, str]:
@@ -104,13 +112,17 @@ def _labels(experiment, template: str) -> dict[str, str]:
 
 @report("retrieval_benchmark", params=RetrievalBenchmarkParams)
 def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkParams) -> ReportOutput:
-    """PSB metrics, precision-recall curves, a 7x7 dissimilarity table and top-10 grids per method."""
+    """PSB metrics, precision-recall curves, a 7x7 dissimilarity table and top-k grids per method."""
     import matplotlib.pyplot as plt
 
     from topomatch.stages.retrieval.fusion import fused_matrix
     from topomatch.stages.retrieval.metrics import retrieval_metrics
 
     fusions = params.all_fusions()
+    unknown = [m for m in params.thumbnail_methods or [] if m not in params.methods and m not in fusions]
+    if unknown:
+        raise ConfigError(f"retrieval_benchmark: thumbnail_methods {', '.join(unknown)} are not among the report's "
+                          f"methods and fusions ({', '.join([*params.methods, *fusions])})")
     labels = _labels(experiment, params.labels)
     items = [r for r in results if r.ok and str(Path(r.input_path).resolve()) in labels]
     if len(items) < 2:
@@ -155,9 +167,12 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
                 row[f"{y[j]} {Path(items[j].input_path).name.split('.')[0]}"] = f"{values[k]:.4f}" + (" *" if k == best else "")
             table.append(row)
         out.tables[f"{params.name}_7x7_{method}"] = table
-        if params.thumbnails:
+        if params.thumbnails and (params.thumbnail_methods is None or method in params.thumbnail_methods):
             queries = [first_of[c] for c in params.queries if c in first_of and first_of[c] in where]
-            out.figures[f"{params.name}_top10_{method}"] = _top10_grid(items, y, D, kept, where, queries, method)
+            for k in params.top_k:
+                out.figures[f"{params.name}_top{k}_{method}"] = _top_k_grid(items, y, D, kept, where, queries, method, k)
+    if params.thumbnails and params.samples_per_class:
+        out.figures[f"{params.name}_samples"] = _class_samples(items, y, params.samples_per_class)
     out.tables[f"{params.name}_metrics"] = metric_rows
     if ablation:
         out.tables[f"{params.name}_ablation"] = ablation
@@ -198,24 +213,50 @@ def _restrict(matrix: tuple[list[int], np.ndarray], kept: list[int]) -> np.ndarr
     return matrix[1][np.ix_(idx, idx)]
 
 
-def _top10_grid(items, y, D, kept, where, queries, method):
+def _top_k_grid(items, y, D, kept, where, queries, method, k):
+    """One row per query: the query, then its ``k`` nearest other models; green the query's class, red not."""
     import matplotlib.pyplot as plt
 
     from topomatch.stages.mesh.render import draw_mesh
 
-    fig = plt.figure(figsize=(11 * 1.3, len(queries) * 1.5))
+    fig = plt.figure(figsize=((k + 1) * 1.3, len(queries) * 1.5 + 0.75))
     for row, q in enumerate(queries):
         d = D[where[q]].copy()
-        order = [kept[k] for k in np.argsort(d, kind="stable") if kept[k] != q][:10]
+        order = [kept[j] for j in np.argsort(d, kind="stable") if kept[j] != q][:k]
         for col, i in enumerate([q] + order):
-            ax = fig.add_subplot(len(queries), 11, row * 11 + col + 1, projection="3d")
-            mesh = items[i].final("mesh")
+            ax = fig.add_subplot(len(queries), k + 1, row * (k + 1) + col + 1, projection="3d")
             hit = y[i] == y[q]
-            draw_mesh(ax, mesh, color=(0.55, 0.6, 0.75) if col == 0 else ((0.6, 0.8, 0.6) if hit else (0.85, 0.55, 0.55)))
+            draw_mesh(ax, items[i].final("mesh"),
+                      color=(0.55, 0.6, 0.75) if col == 0 else ((0.6, 0.8, 0.6) if hit else (0.85, 0.55, 0.55)))
             ax.set_title(("query: " if col == 0 else f"{col}. ") + str(y[i]), fontsize=6,
                          color="black" if col == 0 or hit else "#b00")
-    fig.suptitle(f"Top-10 retrieval ({method}); green: same class, red: other class", fontsize=9)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.9, wspace=0, hspace=0.25)
+    _title_above(fig, f"Top-{k} retrieval ({method}); green: same class, red: other class")
+    return fig
+
+
+def _title_above(fig, title: str, header: float = 0.75) -> None:
+    """The figure's title in a band of ``header`` inches above the panels and their titles (3D panels'
+    titles sit well above their axes: a default suptitle runs into them)."""
+    height = fig.get_figheight()
+    fig.subplots_adjust(left=0, right=1, bottom=0, top=1 - header / height, wspace=0, hspace=0.25)
+    fig.suptitle(title, fontsize=9, y=1 - 0.12 / height, va="top")
+
+
+def _class_samples(items, y, n):
+    """The first ``n`` models of every class, classes in order of first appearance, ``2 n`` per row."""
+    import matplotlib.pyplot as plt
+
+    from topomatch.stages.mesh.render import draw_mesh
+
+    picks = [i for c in dict.fromkeys(y) for i in np.flatnonzero(y == c)[:n]]
+    columns = 2 * n * 2
+    rows = -(-len(picks) // columns)
+    fig = plt.figure(figsize=(columns * 1.3, rows * 1.5 + 0.75))
+    for k, i in enumerate(picks):
+        ax = fig.add_subplot(rows, columns, k + 1, projection="3d")
+        draw_mesh(ax, items[i].final("mesh"), color=(0.6, 0.65, 0.8))
+        ax.set_title(f"{y[i]} {Path(items[i].input_path).name.split('.')[0]}", fontsize=6)
+    _title_above(fig, f"{n} models of each of the {len(dict.fromkeys(y))} classes")
     return fig
 
 

@@ -69,7 +69,8 @@ def spectral_figures_report(experiment, results, params: SpectralFiguresParams) 
     fig_spy.suptitle("Sparsity of the stiffness Q and mass K matrices (Q φ = λ K φ)", fontsize=9)
     fig_spy.tight_layout()
     fig_phi.suptitle("Leading Laplace–Beltrami eigenfunctions (each scaled to its own range)", fontsize=9)
-    fig_phi.subplots_adjust(left=0, right=1, bottom=0.08, top=0.9, wspace=0.0, hspace=0.15)
+    fig_phi.subplots_adjust(left=0, right=1, bottom=0.08, top=1 - 0.5 / fig_phi.get_figheight(), wspace=0.0,
+                            hspace=0.15)  # half an inch above the panels' titles for the figure's title
     bar = fig_phi.add_axes((0.3, 0.03, 0.4, 0.015))
     fig_phi.colorbar(plt.cm.ScalarMappable(cmap="coolwarm"), cax=bar, orientation="horizontal", ticks=[0, 1])
     bar.set_xticklabels(["min", "max"], fontsize=7)

@@ -15,6 +15,7 @@ from pydantic import Field
 from topomatch.pipeline.config import build_experiment
 from topomatch.pipeline.contract import Params, StageResult, stage
 from topomatch.pipeline.registry import STAGES, discover, register_module
+from topomatch.pipeline import reports
 from topomatch.pipeline.runner import run_experiment
 
 
@@ -50,6 +51,26 @@ def test_second_run_is_all_cache_hits_with_identical_results(small_config, tmp_p
     assert all(h for hits in _stage_hits(second).values() for h in hits.values())
     for a, b in zip(first.items, second.items):
         np.testing.assert_array_equal(a.final("mesh").V, b.final("mesh").V)
+
+
+def test_a_second_run_reuses_unchanged_reports_and_redraws_changed_ones(small_config, tmp_path, monkeypatch):
+    small_config["reports"] = [{"table": {"name": "areas", "columns": ["item", "measures.area*"]}},
+                               {"table": {"name": "names", "columns": ["item"]}}]
+    first = _run(small_config, tmp_path)
+    areas = first.run_dir / "tables" / "areas.json"
+    stamp = areas.stat().st_mtime_ns
+    second = _run(small_config, tmp_path)
+    assert second.manifest["reports_reused"] == ["table", "table#1"] and areas.stat().st_mtime_ns == stamp
+    assert second.manifest["outputs"] == first.manifest["outputs"]
+    areas.unlink()  # a report whose files are gone is drawn again
+    third = _run(small_config, tmp_path)
+    assert third.manifest["reports_reused"] == ["table#1"] and areas.is_file()
+    monkeypatch.setattr(reports, "_FINGERPRINT", "another version of the code")  # a code change: all drawn again
+    assert _run(small_config, tmp_path).manifest["reports_reused"] == []
+    monkeypatch.undo()
+    small_config["stages"][2] = {"noise": {"sigma": 0.0, "relative_to": "bbox_diagonal", "seed": 4}}
+    fourth = _run(small_config, tmp_path)  # another config is another run folder: nothing to reuse
+    assert fourth.manifest["reports_reused"] == []
 
 
 def test_changed_param_recomputes_only_downstream(small_config, tmp_path):

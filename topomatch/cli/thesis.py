@@ -16,7 +16,8 @@ def add_parsers(sub) -> None:
             description="Run every figure and table config of the thesis (bundled data, and the data root for "
                         "the rest; what is missing is skipped with a note) and write OUT/thesis.html: for each "
                         "thesis figure and table its caption and claim, our figure or table, the measured verdict "
-                        "and the config.", handler=cmd_thesis, build=_arguments)
+                        "and its reason, the departures from the thesis and the command that re-runs it. With "
+                        "--only, the rows asked for replace theirs in the existing page; the others are kept.", handler=cmd_thesis, build=_arguments)
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
@@ -27,12 +28,23 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", action="append", default=[], metavar="ID",
                    help="only these figures/tables or configs (repeatable): 'Fig. 3.9', 3.9, 'Table 3.1', "
                         "robustness/noise")
+    p.add_argument("--list", action="store_true", help="print the catalogue (every figure and table, its configs, "
+                                                       "departures and command) without running anything")
     p.add_argument("--json", action="store_true", help="print one JSON object: the verdict of every item")
 
 
 def cmd_thesis(args: argparse.Namespace) -> int:
-    from topomatch.thesis import reproduce
+    from topomatch.thesis import catalogue_rows, reproduce
 
+    if args.list:
+        rows = catalogue_rows()
+        if args.json:
+            print_json({"items": rows})
+        else:
+            width = max(len(r["id"]) for r in rows)
+            for r in rows:
+                print(f"{r['id']:<{width}}  {', '.join(r['configs']) or '(illustration)':<46}  {r['claim']}")
+        return 0
     outcomes = reproduce(args.out, data_root=args.data_root, only=args.only or None, progress=info)
     page = f"{args.out}/thesis.html"
     if args.json:
