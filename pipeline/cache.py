@@ -32,8 +32,22 @@ class CacheWarning(UserWarning):
 
 
 def hash_file(path: str | Path, chunk: int = 1 << 20) -> str:
-    """SHA-256 of a file's name and content (hex)."""
-    h = hashlib.sha256(Path(path).name.encode() + b"\0")
+    """SHA-256 of a file's name and content (hex); of a folder (a DICOM series), its name and the names and
+    contents of the regular files directly in it, in name order.
+
+    Raises
+    ------
+    OSError
+        Unreadable, or neither a regular file nor a folder (a FIFO, socket or device would block or never end).
+    """
+    path = Path(path)
+    h = hashlib.sha256(path.name.encode() + b"\0")
+    if path.is_dir():
+        for member in sorted(p for p in path.iterdir() if p.is_file()):
+            h.update(hash_file(member, chunk).encode())
+        return h.hexdigest()
+    if not path.is_file():
+        raise OSError("not a regular file (a FIFO, socket or device): refused")
     with open(path, "rb") as fh:
         while block := fh.read(chunk):
             h.update(block)

@@ -254,6 +254,10 @@ def read_yaml(path: str | Path) -> dict[str, Any]:
     path = Path(path)
     if not path.exists():
         raise InputError(path, "config file not found")
+    if path.is_dir():
+        raise InputError(path, "is a folder, not a config file: give the YAML file")
+    if not path.is_file():  # a FIFO would block the read
+        raise InputError(path, "not a regular file (a FIFO, socket or device): a config is a YAML text file")
     try:
         if path.stat().st_size > 4 * 2**20:
             raise ConfigError(f"{path}: config file larger than 4 MiB: refused")
@@ -425,6 +429,8 @@ def _pairs_from_csv(spec: PairsCsvConfig, one) -> list[InputUnit]:
     import csv
 
     (path,) = one(spec.path, "inputs.pairs_csv.path")[:1]
+    if not path.is_file():
+        raise InputError(path, "not a regular file: the pairs table is a CSV file")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.DictReader(fh, strict=True))

@@ -48,3 +48,8 @@ class RunError(TopomatchError):
     """A run that finished with failed items; the results of the others were written."""
 
     kind = "run"
+
+
+class InputWarning(UserWarning):
+    """An input was read under an assumption the file does not state (e.g. a NIfTI header without an
+    orientation); the CLI prints it as ``topomatch: warning: ...``."""

@@ -9,6 +9,7 @@ permissions of the process's umask (group- and world-readable under the common 0
 
 from __future__ import annotations
 
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -29,12 +30,21 @@ def atomic_write_bytes(path: str | Path, data: bytes, *, durable: bool = True) -
     Raises
     ------
     OSError
-        The folder cannot be created or written (e.g. ``path``'s parent is a file).
+        The folder cannot be created or written (e.g. ``path``'s parent is a file), or ``path`` is a folder; the
+        error names ``path``, never the temporary file.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a folder, not a file", str(path))
+    tmp = None
     try:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except FileExistsError:  # a file where a folder of the path should be
+            in_the_way = next(p for p in (path.parent, *path.parent.parents) if p.exists())
+            raise NotADirectoryError(errno.ENOTDIR, f"{in_the_way} is a file, not a folder", str(path)) from None
+        # a short prefix: the temporary name must fit where the final one fits (NAME_MAX is 255 bytes)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name[:32]}.", suffix=".tmp")
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
             if durable:
@@ -42,8 +52,13 @@ def atomic_write_bytes(path: str | Path, data: bytes, *, durable: bool = True) -
                 os.fsync(fh.fileno())
         os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
+    except OSError as exc:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        raise type(exc)(exc.errno, exc.strerror or str(exc), str(path)) from None
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         raise
 
 

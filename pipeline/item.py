@@ -113,7 +113,8 @@ def run_stages(chain: list[Any] | tuple[Any, ...], *, paths: dict[str, str | Pat
     out = ItemResult(label, label, {}, label)
     state: dict[str, tuple[Any, str | None]] = {k: (v, None) for k, v in values.items()}
     for key, path in paths.items():
-        check_readable_file(path)
+        if not Path(path).is_dir():  # a folder is an input too (a DICOM series); its files are hashed
+            check_readable_file(path)
         try:
             state[key] = (str(path), hash_file(path))
         except OSError as exc:

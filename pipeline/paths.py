@@ -66,6 +66,8 @@ def resolve_input(template: str, *, base_dir: Path, root: Path | None, where: st
         return matches
     if not path.exists():
         raise InputError(path, "file not found")
+    if not (path.is_file() or path.is_dir()):  # reading a FIFO blocks until something writes to it
+        raise InputError(path, "not a regular file (a FIFO, socket or device): refused")
     return [path]
 
 

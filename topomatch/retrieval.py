@@ -19,6 +19,7 @@ import dataclasses
 import hashlib
 import json
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from topomatch.pipeline.config import Experiment, build_experiment
-from topomatch.pipeline.errors import ConfigError, InputError, StageError
+from topomatch.pipeline.errors import ConfigError, InputError, InputWarning, StageError
 from topomatch.pipeline.files import check_writable_folder
 from topomatch.pipeline.item import ItemResult, run_item
 from topomatch.shape_index import Row, ShapeIndex
@@ -83,6 +84,51 @@ def compute_descriptor(path: str | Path, method: str, cache: str | None = None) 
     if not result.ok:
         raise StageError(result.error or f"{path}: failed")
     return result.final("descriptor"), result
+
+
+def _save_quietly(ann, path: Path) -> None:
+    """Save a shortlist graph beside its index; a read-only folder still answers, from the graph in memory."""
+    try:
+        ann.save(path)
+    except OSError:
+        pass
+
+
+def usable_rows(rows: list[Row], method: str, db: str | Path) -> list[Row]:
+    """``rows``, after checking that each stored descriptor is what ``method`` makes: read, finite, of its kind
+    and shape (a vector of the rows' common length; an (n, c) endpoint table with the rows' common column count
+    and n = ``n_endpoints``). Any other (a damaged, NULL, scalar, NaN, shorter or longer descriptor: an index
+    edited by hand or by another program) is an InputError that names the first such row and counts them."""
+    from collections import Counter
+
+    def shape_key(a: np.ndarray) -> tuple:
+        return a.shape if a.ndim == 1 else a.shape[1:]
+
+    read = [r for r in rows if r.descriptor is not None and r.descriptor.ndim in (1, 2)]
+    common = Counter(shape_key(r.descriptor) for r in read).most_common(1)
+    expected = common[0][0] if common else None
+    good, bad = [], []
+    for r in rows:
+        d = r.descriptor
+        if d is None:
+            bad.append((r, r.problem or "no descriptor stored (NULL) on a row marked ok"))
+        elif d.ndim not in (1, 2) or (d.ndim == 1 and d.size == 0):  # an endpoint table may have no rows
+            bad.append((r, f"a descriptor of shape {d.shape}, not a vector or an endpoint table"))
+        elif not np.all(np.isfinite(d)):
+            bad.append((r, f"{int((~np.isfinite(d)).sum())} NaN or infinite values"))
+        elif shape_key(d) != expected:
+            bad.append((r, f"shape {d.shape} where the other rows of {method} have {expected}"))
+        elif d.ndim == 2 and r.n_endpoints is not None and d.shape[0] != r.n_endpoints:
+            bad.append((r, f"{d.shape[0]} endpoint rows where the row says {r.n_endpoints} endpoints"))
+        else:
+            good.append(r)
+    if bad:
+        first, why = bad[0]
+        raise InputError(db, f"row {first.id} ({first.path}) of {method}: {why}; {len(bad)} of the {len(rows)} "
+                             f"{method} rows hold a descriptor that topomatch did not write (an answer without them "
+                             f"would be silently partial): delete those rows (or the index) and run topomatch index "
+                             f"again")
+    return good
 
 
 def _options(method: Method, options: dict[str, Any] | None) -> MatchOptions:
@@ -387,7 +433,7 @@ class Collection:
         asked = asked or method
         phash = params_of(method_experiment(method, []))[1]
         with ShapeIndex(self.db, readonly=True) as store:
-            rows = store.rows(method, phash)
+            rows = usable_rows(store.rows(method, phash), method, self.db)
             if not rows:
                 present = store.methods()
                 listing = ", ".join(f"{m} ({n} ok)" for m, _, n in present) or "nothing"
@@ -500,11 +546,34 @@ class Collection:
 
         keys = np.array([shape_key(r.path) for r in rows], dtype=np.uint64)
         path = self.db.with_name(self.db.name + ".ann")
-        ann = Shortlist.load(path)
+        ann, problem = Shortlist.load(path)
+        if ann is not None and not set(ann.parts) <= set(descriptors):
+            ann, problem = None, f"it embeds parts ({', '.join(ann.parts)}) that {m.name} does not have"
+        if ann is not None:
+            dims = sum(descriptors[p][0].data.size for p in ann.parts) if rows else int(ann.index.ndim)
+            if dims != int(ann.index.ndim):
+                ann, problem = None, f"its vectors have {int(ann.index.ndim)} dimensions, the index's {dims}"
+        if problem:
+            warnings.warn(f"{path}: {problem}; ignored, and rebuilt from the index", InputWarning, stacklevel=3)
+            ann = None
+
+        def vectors(idx, parts):
+            return {p: np.stack([descriptors[p][i].data.ravel() for i in idx]) for p in parts}
+
         settings = [m.fusion.screen, list(m.fusion.order_weights or ())]
-        current = (ann is not None and not refresh and ann.sample.get("settings") == settings and len(ann) == len(keys)
-                   and bool(np.all(ann.index.contains(keys))))
-        if current:
+        with ShapeIndex(self.db, readonly=True) as store:
+            generation = store.generation()
+        if (ann is not None and not refresh and generation is not None and ann.sample.get("generation") == generation
+                and ann.sample.get("settings") == settings):  # no row changed since the graph was saved
+            d = ann.sample["decision"]
+            return ann, keys, ann.sample["scales"], dataclasses.replace(FusionDecision.from_dict(d), rerank_k=None)
+        # the rows changed (or the index cannot say): compare the graph's vectors with the rows', shape by shape
+        stale, gone = (ann.changed(keys, vectors(range(len(rows)), ann.parts)) if ann is not None and len(rows)
+                       else (np.arange(len(rows)), []))
+        stale = np.union1d(stale, [i for i, r in enumerate(rows) if r.path in refresh]).astype(np.int64)
+        if ann is not None and not len(stale) and not gone and ann.sample.get("settings") == settings:
+            ann.sample["generation"] = generation  # the graph holds exactly the index's current vectors
+            _save_quietly(ann, path)
             d = ann.sample["decision"]
             return ann, keys, ann.sample["scales"], dataclasses.replace(FusionDecision.from_dict(d), rerank_k=None)
         scales, decision = sample_fusion(descriptors, m.fusion, lambda p: self._part_options(p, m, options))
@@ -512,22 +581,14 @@ class Collection:
         if not parts:
             raise ConfigError(f"{self.db}: the shortlist needs a vector part, and the screening kept only "
                               f"{', '.join(decision.kept)}")
-
-        def vectors(idx):
-            return {p: np.stack([descriptors[p][i].data.ravel() for i in idx]) for p in parts}
-
         if ann is None or ann.parts != parts or any(abs(ann.scales[p] / scales[p] - 1) > 0.2 for p in parts):
-            ann = Shortlist.build(keys, vectors(range(len(rows))), {p: scales[p] for p in parts})
-        else:
-            stale = np.array([r.path in refresh for r in rows], dtype=bool)
-            todo = np.flatnonzero(~np.asarray(ann.index.contains(keys), dtype=bool) | stale)
-            if len(todo):
-                ann.add(keys[todo], vectors(todo))
-        ann.sample = {"scales": scales, "decision": decision.to_dict(), "settings": settings}
-        try:
-            ann.save(path)
-        except OSError:  # a read-only index still answers, from the graph in memory
-            pass
+            ann = Shortlist.build(keys, vectors(range(len(rows)), parts), {p: scales[p] for p in parts})
+        else:  # re-embed what changed (re-indexed, edited, new), drop what left the index
+            ann.remove(gone)
+            if len(stale):
+                ann.add(keys[stale], vectors(stale, parts))
+        ann.sample = {"scales": scales, "decision": decision.to_dict(), "settings": settings, "generation": generation}
+        _save_quietly(ann, path)
         return ann, keys, scales, decision
 
     def _shortlisted(self, m: Method, rows: list[Row], descriptors: dict[str, list[Descriptor]],

@@ -59,7 +59,18 @@ CREATE TABLE IF NOT EXISTS shapes (
 );
 CREATE INDEX IF NOT EXISTS shapes_method ON shapes (method, params_hash, status);
 CREATE INDEX IF NOT EXISTS shapes_path ON shapes (path);
+CREATE TABLE IF NOT EXISTS index_state (key TEXT PRIMARY KEY, value INTEGER NOT NULL);
+INSERT OR IGNORE INTO index_state VALUES ('generation', 0);
+CREATE TRIGGER IF NOT EXISTS shapes_inserted AFTER INSERT ON shapes
+    BEGIN UPDATE index_state SET value = value + 1 WHERE key = 'generation'; END;
+CREATE TRIGGER IF NOT EXISTS shapes_updated AFTER UPDATE ON shapes
+    BEGIN UPDATE index_state SET value = value + 1 WHERE key = 'generation'; END;
+CREATE TRIGGER IF NOT EXISTS shapes_deleted AFTER DELETE ON shapes
+    BEGIN UPDATE index_state SET value = value + 1 WHERE key = 'generation'; END;
 """
+#: ``index_state.generation`` counts every change of the shapes table (triggers: topomatch's writes and anyone
+#: else's, e.g. the sqlite3 shell), so that files built from the rows (the shortlist graph) know whether they
+#: are current. An index made before the table existed gets it on its next writable open.
 
 
 @dataclass(frozen=True)
@@ -75,6 +86,7 @@ class Row:
     n_endpoints: int | None
     kind: str | None
     descriptor: np.ndarray | None
+    problem: str | None = None  # why the stored descriptor cannot be used (None: it was read)
 
 
 def _to_blob(array: np.ndarray) -> bytes:
@@ -83,9 +95,19 @@ def _to_blob(array: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
+#: Largest stored descriptor read (bytes): an endpoint descriptor is a few hundred bytes, a vector a few KB.
+MAX_BLOB_BYTES = 4 * 2**20
+
+
 def _from_blob(blob: bytes | None, where: Path, mesh: str) -> np.ndarray | None:
     if blob is None:
         return None
+    if not isinstance(blob, (bytes, bytearray, memoryview)):
+        raise InputError(where, f"the descriptor of {mesh} is stored as {type(blob).__name__} {str(blob)[:40]!r}, "
+                                f"not as the saved array topomatch writes")
+    if len(blob) > MAX_BLOB_BYTES:
+        raise InputError(where, f"the descriptor of {mesh} is {len(blob):,} bytes, more than any descriptor "
+                                f"({MAX_BLOB_BYTES:,}): not one topomatch wrote")
     try:
         array = np.load(io.BytesIO(blob), allow_pickle=False)
     except Exception as exc:  # a pickle (refused), a truncated or foreign blob
@@ -94,6 +116,15 @@ def _from_blob(blob: bytes | None, where: Path, mesh: str) -> np.ndarray | None:
     if array.dtype.kind not in "biuf":
         raise InputError(where, f"the descriptor of {mesh} has dtype {array.dtype}, not numbers")
     return array
+
+
+def _row(r: tuple, where: Path) -> Row:
+    """A :class:`Row` from a SELECT of the shapes table; a descriptor that cannot be read is None, with the
+    ``problem`` (the caller decides: :func:`topomatch.retrieval.usable_rows` skips and counts such rows)."""
+    try:
+        return Row(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], _from_blob(r[8], where, r[1]))
+    except InputError as exc:
+        return Row(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], None, exc.problem)
 
 
 #: How long a database locked by another process is waited for (seconds).
@@ -134,7 +165,7 @@ class ShapeIndex:
             else:
                 self.db = sqlite3.connect(self.path, timeout=BUSY_SECONDS)
                 tables = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'table'")}
-                if tables - {"shapes"}:  # someone else's database: never add our table to it
+                if tables - {"shapes", "index_state"}:  # someone else's database: never add our table to it
                     self.db.close()
                     raise InputError(self.path, f"not a topomatch index: a SQLite database with other tables "
                                                 f"({', '.join(sorted(tables)[:5])}); choose another --db")
@@ -151,6 +182,14 @@ class ShapeIndex:
 
     def close(self) -> None:
         self.db.close()
+
+    def generation(self) -> int | None:
+        """How many changes the shapes table has seen (None for an index made before the counter existed)."""
+        try:
+            row = self.db.execute("SELECT value FROM index_state WHERE key = 'generation'").fetchone()
+        except sqlite3.Error:
+            return None
+        return None if row is None else int(row[0])
 
     def __enter__(self) -> "ShapeIndex":
         return self
@@ -229,8 +268,7 @@ class ShapeIndex:
             sql += " AND status = ?"
             args.append(status)
         sql += " ORDER BY path, id"
-        return [Row(r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], _from_blob(r[8], self.path, r[1]))
-                for r in self._sql(sql, args)]
+        return [_row(r, self.path) for r in self._sql(sql, args)]
 
     def methods(self) -> list[tuple[str, str, int]]:
         """(method, params_hash, ok rows) present in the index."""

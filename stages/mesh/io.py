@@ -123,6 +123,38 @@ def _read_pymeshlab(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
     return np.asarray(m.vertex_matrix(), dtype=np.float64), np.asarray(m.face_matrix(), dtype=np.int64), "pymeshlab"
 
 
+def _read_plyfile(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
+    """A binary big-endian PLY, read with plyfile: MeshLab's reader byte-swaps them wrongly (double
+    coordinates read as 1e306, a ``ushort`` list count as a truncated file). Polygons become fans."""
+    from plyfile import PlyData
+
+    try:
+        data = PlyData.read(str(plain))
+        vertex = data["vertex"]
+        V = np.column_stack([np.asarray(vertex[a], dtype=np.float64) for a in ("x", "y", "z")])
+        face = data["face"]
+        name = next(p.name for p in face.properties if p.name in ("vertex_indices", "vertex_index"))
+        lists = face[name]
+    except (KeyError, StopIteration) as exc:
+        raise ValueError(f"no vertex x, y, z or face vertex_indices ({exc})") from None
+    except Exception as exc:  # plyfile's PlyParseError, numpy's ValueError for short data
+        raise ValueError(f"{type(exc).__name__}: {exc}") from None
+    sizes = np.fromiter((len(f) for f in lists), dtype=np.int64, count=len(lists))
+    if np.any(sizes < 3):
+        raise ValueError(f"face {int(np.argmax(sizes < 3))} has fewer than 3 vertices")
+    if np.all(sizes == 3):
+        F = np.vstack(lists).astype(np.int64) if len(lists) else np.zeros((0, 3), np.int64)
+    else:
+        F = np.array([(f[0], f[k], f[k + 1]) for f in lists for k in range(1, len(f) - 1)], np.int64).reshape(-1, 3)
+    return V, F, "plyfile"
+
+
+def _big_endian_ply(plain: Path) -> bool:
+    with open(plain, "rb") as fh:
+        head = fh.read(4096)
+    return head.startswith(b"ply") and b"binary_big_endian" in head.split(b"end_header")[0]
+
+
 def _read_open3d(plain: Path) -> tuple[np.ndarray, np.ndarray, str]:
     import open3d as o3d
 
@@ -179,6 +211,8 @@ def read_mesh_checked(path: str | Path, *, reader: str = "auto") -> tuple[Mesh, 
         if plain.stat().st_size == 0:
             raise InputError(path, "file is empty")
         facts = check_structure(plain, fmt, path)
+        if reader == "auto" and fmt == ".ply" and _big_endian_ply(plain):
+            readers = [_read_plyfile]
         for read in readers:
             try:
                 V, F, used = read(plain)

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import Field
+from pydantic import Field, field_validator
 
 from topomatch.pipeline.contract import (ConfigError, Params, ReportOutput, axis_label, gallery_layout, report,
                                         series_style, sweep_ticks, sweep_value_labels)
@@ -322,6 +322,18 @@ class ExportParams(Params):
         default_factory=lambda: ["ply"], min_length=1, description="graph file formats (PLY polyline first)")
     where: dict[str, float | int | str | bool] = Field(default_factory=dict,
                                                        description="only items with these sweep values")
+
+    @field_validator("folder")
+    @classmethod
+    def _inside_the_run(cls, value: str) -> str:
+        if value in (".", "..") or value in RUN_FOLDERS:
+            raise ValueError(f"{value!r} is not a folder of its own inside the run folder (not '.', '..' or one of "
+                             f"{', '.join(RUN_FOLDERS)}); e.g. exports")
+        return value
+
+
+#: The run folder's own sub-folders, which an export must not write into.
+RUN_FOLDERS = ("figures", "tables", "views", "assets")
 
 
 def item_file_stem(r) -> str:

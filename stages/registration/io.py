@@ -11,14 +11,18 @@ from __future__ import annotations
 
 import contextlib
 import locale
+from io import BytesIO
 import math
+import re
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from pydantic import Field
 
-from topomatch.pipeline.contract import InputError, Params, StageResult, check_readable_file, limit_from_env, stage
+from topomatch.pipeline.contract import (InputError, InputWarning, Params, StageResult, check_readable_file,
+                                         limit_from_env, stage)
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.transform import RigidTransform
 
@@ -72,6 +76,63 @@ def keep_locale():
             locale.setlocale(locale.LC_ALL, saved)
 
 
+def _pixel_bytes(reader) -> int:
+    """Bytes of one pixel (all its components) of the image whose header ``reader`` read."""
+    import SimpleITK as sitk
+
+    probe = sitk.Image([1] * reader.GetDimension(), reader.GetPixelID(), reader.GetNumberOfComponents())
+    return sitk.GetArrayViewFromImage(probe).itemsize * reader.GetNumberOfComponents()
+
+
+def _check_data_size(path: Path, reader, size: tuple[int, ...]) -> None:
+    """Refuse an uncompressed MetaImage or NIfTI file holding fewer bytes of pixel data than its header declares
+    (SimpleITK would zero-fill a NIfTI file, and says "No such file or directory" for a MetaImage one)."""
+    fmt = image_format(path)
+    declared = math.prod(int(s) for s in size) * _pixel_bytes(reader)
+    if fmt == ".nii":
+        offset = int(_raw_nifti_header(path).get_data_offset())
+        data_file, available = path, path.stat().st_size - offset
+    elif fmt in (".mha", ".mhd"):
+        head = path.read_bytes()[:65536] if fmt == ".mha" else path.read_bytes()
+        if re.search(rb"CompressedData\s*=\s*True", head, re.I):
+            return  # the zlib stream's length says nothing of the pixels'
+        found = re.search(rb"ElementDataFile\s*=\s*([^\r\n]+)\r?\n", head)
+        if not found:
+            return
+        name = found.group(1).strip().decode("utf-8", "replace")
+        if name.upper() == "LOCAL":
+            data_file, available = path, path.stat().st_size - found.end()
+        elif any(c in name for c in "%*") or name.upper().startswith("LIST"):
+            return  # a pattern or list of slice files: ITK checks each
+        else:
+            data_file = path.parent / name
+            if not data_file.is_file():
+                raise InputError(path, f"its pixel data file {data_file} (ElementDataFile) is missing")
+            available = data_file.stat().st_size
+    else:
+        return
+    if fmt == ".nii" and available <= 0:
+        raise InputError(path, f"its data offset (vox_offset {path.stat().st_size - available:,}) lies at or past the "
+                               f"end of the file ({path.stat().st_size:,} bytes): a damaged header")
+    if available < declared:
+        dims = " x ".join(str(int(s)) for s in size)
+        raise InputError(path, f"truncated: the header declares {dims} pixels ({declared:,} bytes of pixel data) but "
+                               f"{data_file.name} holds {max(available, 0):,}")
+
+
+def _check_geometry(path: Path, spacing, origin, direction) -> None:
+    """Refuse spacings that are not finite and positive, and a non-finite origin or a singular direction."""
+    bad = [f"{s:g}" for s in spacing if not (math.isfinite(s) and s > 0)]
+    if bad:
+        raise InputError(path, f"pixel spacing {', '.join(f'{s:g}' for s in spacing)} mm: every spacing must be a "
+                               f"finite positive number; fix the header")
+    if not all(math.isfinite(o) for o in origin):
+        raise InputError(path, f"origin {tuple(origin)} is not finite; fix the header")
+    d = np.asarray(direction, dtype=float).reshape(len(spacing), len(spacing))
+    if not (np.all(np.isfinite(d)) and abs(np.linalg.det(d)) > 1e-6):
+        raise InputError(path, "direction matrix is not a rotation (non-finite or singular); fix the header")
+
+
 def _sitk_detail(exc: Exception) -> str:
     lines = [ln.strip() for ln in str(exc).strip().splitlines() if ln.strip()]
     return lines[-1] if lines else "SimpleITK could not read it"
@@ -90,6 +151,39 @@ def _dicom_files(folder: Path) -> list[str]:
         raise InputError(folder, f"holds {len(ids)} DICOM series ({'; '.join(counts)}); a registration input is one "
                                  f"series: put each series in its own folder")
     return list(sitk.ImageSeriesReader.GetGDCMSeriesFileNames(str(folder), ids[0]))
+
+
+def _check_slice_spacing(folder: Path, files: list[str]) -> None:
+    """Refuse a DICOM series whose slices are not evenly spaced along their normal (a missing or repeated slice):
+    ITK would read it as evenly spaced, at the average step, and every position past the gap would be wrong."""
+    import SimpleITK as sitk
+
+    if len(files) < 3:
+        return
+    positions, normal = [], None
+    for name in files:
+        reader = sitk.ImageFileReader()
+        reader.SetFileName(name)
+        reader.ReadImageInformation()
+        keys = set(reader.GetMetaDataKeys())
+        if not {"0020|0032", "0020|0037"} <= keys:
+            return  # no positions to check (ITK falls back on the file order and the slice thickness)
+        try:
+            position = np.array([float(v) for v in reader.GetMetaData("0020|0032").split("\\")])
+            if normal is None:
+                o = np.array([float(v) for v in reader.GetMetaData("0020|0037").split("\\")])
+                normal = np.cross(o[:3], o[3:6])
+        except ValueError:
+            return
+        positions.append(float(position @ normal))
+    steps = np.diff(np.sort(positions))
+    typical = float(np.median(steps))
+    odd = np.flatnonzero(np.abs(steps - typical) > 0.01 * max(abs(typical), 1e-6))
+    if typical <= 0 or len(odd):
+        k = int(odd[0]) if len(odd) else 0
+        raise InputError(folder, f"its {len(files)} DICOM slices are not evenly spaced: {steps[k]:g} mm between slices "
+                                 f"{k} and {k + 1} (in position order) where the others are {typical:g} mm apart: a "
+                                 f"missing or repeated slice; registration needs a complete series")
 
 
 def _checked(path: str | Path) -> Path:
@@ -140,6 +234,8 @@ def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...], tuple[f
             if fmt not in (".tif", ".tiff"):
                 raise  # TIFF variants Pillow cannot decode go to SimpleITK
     arr, spacing, origin, direction = _read_nifti(path) if fmt in (".nii", ".nii.gz") else _read_with_sitk(path)
+    _check_geometry(path, spacing[:arr.ndim], origin[:arr.ndim], np.asarray(direction).reshape(
+        int(round(len(np.ravel(direction)) ** 0.5)), -1)[:arr.ndim, :arr.ndim])
     d = arr.ndim
     keep = [a for a in range(d) if arr.shape[d - 1 - a] > 1]  # ITK axes of more than one pixel
     direction = np.asarray(direction).reshape(d, d)[np.ix_(keep, keep)]
@@ -158,11 +254,15 @@ def _read_with_sitk(path: Path):
         with keep_locale():
             reader = sitk.ImageFileReader()
             files = _dicom_files(path) if path.is_dir() else [str(path)]
+            if path.is_dir():
+                _check_slice_spacing(path, files)
             reader.SetFileName(files[0])
             reader.ReadImageInformation()
             components = reader.GetNumberOfComponents()
             size = tuple(reader.GetSize()[:2]) + (len(files),) if path.is_dir() else tuple(reader.GetSize())
             _check_size(path, size + ((components,) if components > 1 else ()))
+            if not path.is_dir():
+                _check_data_size(path, reader, size)
             image = sitk.ReadImage(files) if path.is_dir() else reader.Execute()
     except RuntimeError as exc:
         raise InputError(path, f"cannot read image ({_sitk_detail(exc)})") from None
@@ -190,9 +290,13 @@ def _read_nifti(path: Path):
     reader = sitk.ImageFileReader()
     reader.SetFileName(str(path))
     try:
+        _check_nifti_header(path, _raw_nifti_header(path))  # before nibabel or ITK "repair" it on reading
         reader.ReadImageInformation()
         _check_size(path, reader.GetSize())
+        _check_data_size(path, reader, tuple(reader.GetSize()))
         data = np.asarray(nib.load(str(path)).dataobj)
+    except InputError:
+        raise
     except Exception as exc:  # SimpleITK's RuntimeError, nibabel's many types for a damaged file
         detail = _sitk_detail(exc) if isinstance(exc, RuntimeError) else f"{type(exc).__name__}: {exc}"
         raise InputError(path, f"cannot read image ({detail})") from None
@@ -207,6 +311,39 @@ def _read_nifti(path: Path):
     d, n = data.ndim, reader.GetDimension()
     direction = np.array(reader.GetDirection()).reshape(n, n)[:d, :d]
     return data.T, reader.GetSpacing()[:d], reader.GetOrigin()[:d], direction
+
+
+def _raw_nifti_header(path: Path):
+    """The NIfTI-1 or NIfTI-2 header of ``path`` as written (nibabel's ``load`` sets a zero voxel size to 1 and a
+    negative one to its absolute value, and says so on stdout)."""
+    import nibabel as nib
+    from nibabel.openers import ImageOpener
+
+    with ImageOpener(str(path)) as f:
+        raw = f.read(540)
+    for cls in (nib.Nifti1Header, nib.Nifti2Header):
+        for order in ("<", ">"):
+            size = np.frombuffer(raw[:4], dtype=f"{order}i4")[0]
+            if size == cls.sizeof_hdr and len(raw) >= size:
+                return cls.from_fileobj(BytesIO(raw[:size]), check=False)
+    raise InputError(path, "cannot read image (not a NIfTI file: its first four bytes are not the size of a NIfTI-1 "
+                           "or NIfTI-2 header)")
+
+
+def _check_nifti_header(path: Path, header) -> None:
+    """Refuse voxel sizes (pixdim) that are not finite and positive (nibabel and ITK would silently read 0 as 1
+    and keep a negative one); warn when the header has neither a qform nor an sform (ITK then reads the voxel
+    axes as the scanner's, origin 0: the registration's translation is relative to that assumption)."""
+    d = int(header["dim"][0])
+    pixdim = [float(v) for v in header["pixdim"][1:1 + min(max(d, 1), 3)]]
+    if not all(math.isfinite(v) and v > 0 for v in pixdim):
+        raise InputError(path, f"the header's voxel sizes (pixdim) are {', '.join(f'{v:g}' for v in pixdim)}: each "
+                               f"must be a finite positive number of mm; fix the header (e.g. nibabel's set_zooms)")
+    if int(header["qform_code"]) == 0 and int(header["sform_code"]) == 0:
+        warnings.warn(f"{path}: the NIfTI header has neither a qform nor an sform, so its orientation is unknown; it "
+                      f"is read as ITK reads it (voxel axes = scanner axes, origin 0, spacing {pixdim} mm): the "
+                      f"registration's rotation and translation are relative to that assumption", InputWarning,
+                      stacklevel=3)
 
 
 def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
@@ -278,6 +415,8 @@ def image_dimension(path: str | Path) -> int:
     folder, 2 for the Pillow formats). InputError if unreadable."""
     path = _checked(path)
     if path.is_dir():
+        with keep_locale():
+            _dicom_files(path)  # a folder is an input only if it holds one DICOM series
         return 3
     if image_format(path) in PILLOW_SUFFIXES:
         return 2

@@ -20,8 +20,10 @@ def read_labels(path: str | Path) -> dict[str, str]:
         different classes (names the file and the rows).
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise InputError(path, "labels file not found")
+    if not path.is_file():  # a folder, or a FIFO that would block the read
+        raise InputError(path, "not a regular file: the labels are a CSV file")
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
             reader = csv.DictReader(fh)

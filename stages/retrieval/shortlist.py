@@ -61,6 +61,14 @@ def embedding(vectors: dict[str, np.ndarray], scales: dict[str, float]) -> np.nd
     return np.hstack([np.asarray(vectors[p], dtype=np.float64) / scales[p] for p in sorted(vectors)]).astype(np.float32)
 
 
+def row_digests(vectors: dict[str, np.ndarray]) -> np.ndarray:
+    """(n,) uint64 digests of each shape's raw vector parts (sorted by part; not scaled): what the graph holds
+    of a shape, so that a graph can be checked against the index rows it was built from."""
+    stacked = np.hstack([np.ascontiguousarray(vectors[p], dtype=np.float64) for p in sorted(vectors)])
+    return np.array([int.from_bytes(hashlib.blake2b(row.tobytes(), digest_size=8).digest(), "little")
+                     for row in stacked], dtype=np.uint64)
+
+
 @dataclass
 class Shortlist:
     """An HNSW graph over the embeddings of an index's shapes, keyed by :func:`shape_key`.
@@ -77,12 +85,16 @@ class Shortlist:
         What the database's sample gave (saved with the graph, so queries do not recompute it):
         ``scales`` of every part, the screening ``decision`` (FusionDecision.to_dict()) and the
         fusion ``settings`` it was made with.
+    digests : dict
+        key -> :func:`row_digests` of the vectors the graph holds for that shape: the state of the index it
+        was built from (a row re-indexed, edited or removed since no longer matches).
     """
 
     parts: tuple[str, ...]
     scales: dict[str, float]
     index: object
     sample: dict = field(default_factory=dict)
+    digests: dict[int, int] = field(default_factory=dict)
 
     @classmethod
     def build(cls, keys: np.ndarray, vectors: dict[str, np.ndarray], scales: dict[str, float]) -> "Shortlist":
@@ -90,9 +102,11 @@ class Shortlist:
 
         X = embedding(vectors, scales)
         index = Index(ndim=X.shape[1], metric="l2sq", dtype="f32")
+        keys = np.asarray(keys, dtype=np.uint64)
         if len(X):
-            index.add(np.asarray(keys, dtype=np.uint64), X)
-        return cls(tuple(sorted(vectors)), {p: float(scales[p]) for p in sorted(vectors)}, index)
+            index.add(keys, X)
+        return cls(tuple(sorted(vectors)), {p: float(scales[p]) for p in sorted(vectors)}, index,
+                   digests=dict(zip(keys.tolist(), row_digests(vectors).tolist())))
 
     def __len__(self) -> int:
         return len(self.index)
@@ -100,11 +114,26 @@ class Shortlist:
     def add(self, keys: np.ndarray, vectors: dict[str, np.ndarray]) -> None:
         """Add (or replace) shapes."""
         keys = np.asarray(keys, dtype=np.uint64)
-        present = [k for k in keys.tolist() if k in self.index]
-        if present:
-            self.index.remove(present)
+        self.remove(keys)
         if len(keys):
             self.index.add(keys, embedding(vectors, self.scales))
+            self.digests.update(zip(keys.tolist(), row_digests(vectors).tolist()))
+
+    def remove(self, keys) -> None:
+        """Drop shapes (those not in the graph are ignored)."""
+        present = [int(k) for k in np.asarray(keys, dtype=np.uint64).tolist() if k in self.index]
+        if present:
+            self.index.remove(present)
+        for k in present:
+            self.digests.pop(k, None)
+
+    def changed(self, keys: np.ndarray, vectors: dict[str, np.ndarray]) -> tuple[np.ndarray, list[int]]:
+        """(row positions whose vectors differ from the graph's or are not in it, keys in the graph that are not
+        in ``keys``): what the index changed since the graph was saved."""
+        now = row_digests(vectors).tolist()
+        keys = np.asarray(keys, dtype=np.uint64).tolist()
+        stale = np.array([i for i, (k, d) in enumerate(zip(keys, now)) if self.digests.get(k) != d], dtype=np.int64)
+        return stale, sorted(set(self.digests) - set(keys))
 
     def search(self, vectors: dict[str, np.ndarray], count: int) -> np.ndarray:
         """Keys of the ``count`` nearest shapes to one query (``vectors``: part -> (d,) descriptor)."""
@@ -113,27 +142,58 @@ class Shortlist:
         return np.asarray(matches.keys, dtype=np.uint64)
 
     def save(self, path: Path) -> None:
-        """Write the graph to ``path`` and its parts, scales and sample record to ``path.json``."""
-        self.index.save(str(path))
-        Path(f"{path}.json").write_text(json.dumps({"schema": 1, "parts": list(self.parts), "scales": self.scales,
-                                                    "sample": self.sample}))
+        """Write the graph to ``path`` and its parts, scales, sample record, the digest of the graph file and
+        the shapes' digests to ``path.json``, each atomically (a temporary file renamed into place): a process
+        killed between the two leaves a record whose graph digest does not match, which :meth:`load` refuses."""
+        import base64
+        import os
+
+        from topomatch.pipeline.contract import atomic_write_text
+
+        path = Path(path)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        try:
+            self.index.save(str(tmp))
+            graph = hashlib.sha256(tmp.read_bytes()).hexdigest()
+            os.replace(tmp, path)
+        finally:
+            tmp.unlink(missing_ok=True)
+        table = np.array(sorted(self.digests.items()), dtype=np.uint64).reshape(-1, 2)
+        atomic_write_text(Path(f"{path}.json"), json.dumps({
+            "schema": 2, "parts": list(self.parts), "scales": self.scales, "sample": self.sample,
+            "ndim": int(self.index.ndim), "graph_sha256": graph,
+            "digests": base64.b64encode(table.astype("<u8").tobytes()).decode("ascii")}))
 
     @classmethod
-    def load(cls, path: Path) -> "Shortlist | None":
-        """The shortlist saved at ``path``, or None when there is none (or it is unreadable)."""
+    def load(cls, path: Path) -> tuple["Shortlist | None", str | None]:
+        """(the shortlist saved at ``path``, None) when its two files are there and agree; (None, None) when
+        there is none; (None, why) when they are there but cannot be used (damaged, foreign, from an older
+        version, or not the pair written together): the caller rebuilds it and says why."""
+        import base64
+
         from usearch.index import Index
 
-        meta = Path(f"{path}.json")
-        if not (Path(path).is_file() and meta.is_file()):
-            return None
+        path, meta = Path(path), Path(f"{path}.json")
+        if not path.exists() and not meta.exists():
+            return None, None
+        if not (path.is_file() and meta.is_file()):
+            return None, "the graph or its record (.json) is missing or not a regular file"
         try:
             info = json.loads(meta.read_text())
+            if info.get("schema") != 2:
+                return None, f"record schema {info.get('schema')!r}, not 2 (an older or foreign file)"
+            if hashlib.sha256(path.read_bytes()).hexdigest() != info["graph_sha256"]:
+                return None, "the graph is not the one its record was written with (an interrupted save or a copy)"
+            parts = tuple(str(p) for p in info["parts"])
+            scales = {p: float(info["scales"][p]) for p in parts}
+            table = np.frombuffer(base64.b64decode(info["digests"]), dtype="<u8").reshape(-1, 2)
             index = Index.restore(str(path))
-        except (OSError, ValueError, RuntimeError):
-            return None
-        if index is None or info.get("schema") != 1:
-            return None
-        return cls(tuple(info["parts"]), {p: float(s) for p, s in info["scales"].items()}, index, info.get("sample", {}))
+        except (OSError, ValueError, RuntimeError, KeyError, TypeError, AttributeError) as exc:
+            return None, f"unreadable ({type(exc).__name__}: {exc})"
+        if index is None or int(index.ndim) != int(info.get("ndim", -1)) or len(index) != len(table):
+            return None, "the graph's size or dimension does not match its record"
+        digests = dict(zip(table[:, 0].tolist(), table[:, 1].tolist()))
+        return cls(parts, scales, index, info.get("sample", {}), digests), None
 
 
 def sample_fusion(descriptors: dict, fusion, options) -> tuple[dict[str, float], object]:

@@ -153,6 +153,31 @@ def _pickle_blob(path: Path) -> None:
     con.close()
 
 
+def _descriptor(change: Callable[[np.ndarray], object]) -> Callable[[Path], None]:
+    """Replace the stored descriptor of the index's first ok row by ``change(descriptor)``: an array (saved as
+    topomatch saves one), raw bytes, or None (NULL)."""
+    import io as _io
+
+    def damage(path: Path) -> None:
+        con = sqlite3.connect(path)
+        row_id, blob = con.execute("SELECT id, descriptor FROM shapes WHERE status = 'ok' ORDER BY id").fetchone()
+        new = change(np.load(_io.BytesIO(blob), allow_pickle=False))
+        if isinstance(new, np.ndarray):
+            buf = _io.BytesIO()
+            np.save(buf, new, allow_pickle=False)
+            new = buf.getvalue()
+        con.execute("UPDATE shapes SET descriptor = ? WHERE id = ?", (new, row_id))
+        con.commit()
+        con.close()
+    return damage
+
+
+def _nan_first(d: np.ndarray) -> np.ndarray:
+    d = d.astype(np.float64)
+    d.flat[0] = np.nan
+    return d
+
+
 def _damage_cache(how: str) -> Callable[[Path], None]:
     """Damage every entry of the run's cache (``{d}/out/.cache``)."""
     def damage(d: Path) -> None:
@@ -411,7 +436,7 @@ def image_cases() -> list[Case]:
          ["{d}/m.nii"], r"m\.nii: "),
         ("nii-garbage", {"m.nii": b"\0" * 400}, ["{d}/m.nii"], r"m\.nii: "),
         ("unsupported", {"m.xyz": b"abc"}, ["{d}/m.xyz"], r"m\.xyz: "),
-        ("directory", {"sub/x.txt": "x"}, ["{d}/sub"], r"sub: not a regular file"),
+        ("directory", {"sub/x.txt": "x"}, ["{d}/sub"], r"sub: is a folder without a DICOM series"),
         ("png-1bit-bomb", {"m.png": _png_1bit(11000, 11000)}, ["{d}/m.png"],
          r"m\.png: the header declares 11000 x 11000 .*TOPOMATCH_MAX_IMAGE_PIXELS"),
         ("metaimage-dev-zero", {"m.mhd": "ObjectType = Image\nNDims = 2\nDimSize = 20000 20000\n"
@@ -529,6 +554,13 @@ def database_cases() -> list[Case]:
         ("corrupt-pages", _corrupt_pages, r"(damaged|malformed|corrupt|not a topomatch index)"),
         ("truncated", _truncate_half, r"(damaged|malformed|corrupt|not a topomatch index)"),
         ("pickled-blob", _pickle_blob, r"(pickle|unreadable|damaged|descriptor)"),
+        ("nan-descriptor", _descriptor(_nan_first), r"shared\.db: row \d+ .* NaN or infinite"),
+        ("short-descriptor", _descriptor(lambda d: d[:-3]), r"shared\.db: row \d+ .* shape \(\d+,\) where the other"),
+        ("long-descriptor", _descriptor(lambda d: np.concatenate([d, d])), r"shared\.db: row \d+ .* where the other"),
+        ("scalar-descriptor", _descriptor(lambda d: np.array(d.flat[0])), r"shared\.db: row \d+ .* shape \(\)"),
+        ("number-not-blob", _descriptor(lambda d: float(d.flat[0])), r"shared\.db: row \d+ .* stored as float"),
+        ("null-descriptor", _descriptor(lambda d: None), r"shared\.db: row \d+ .*\(NULL\)"),
+        ("huge-descriptor", _descriptor(lambda d: b"\x93NUMPY" + b"\0" * (5 * 2**20)), r"shared\.db: row \d+ .* bytes"),
     ]
     for cid, damage, message in damaged:
         for command in ("query", "evaluate"):
@@ -550,8 +582,113 @@ def cache_cases() -> list[Case]:
     return out
 
 
+def _volume_nii(*, pixdim: tuple[float, float, float] | None = None, orientation: bool = True,
+                vox_offset: int | None = None, keep: float = 1.0) -> Callable[[Path], None]:
+    """The bundled T1 volume written as an uncompressed .nii, then its header bytes edited as a damaged or
+    careless writer leaves them: voxel sizes, no qform / sform, a data offset, or the file cut to ``keep``."""
+    def write(path: Path) -> None:
+        import nibabel as nib
+
+        src = nib.load(str(ITK / "KmeansTest_T1UCharRaw.nii.gz"))
+        nib.save(nib.Nifti1Image(np.asarray(src.dataobj), src.affine), str(path))
+        data = bytearray(path.read_bytes())
+        if pixdim is not None:
+            struct.pack_into("<3f", data, 80, *pixdim)  # pixdim[1..3] of the NIfTI-1 header
+        if not orientation:
+            struct.pack_into("<hh", data, 252, 0, 0)  # qform_code, sform_code
+        if vox_offset is not None:
+            struct.pack_into("<f", data, 108, float(vox_offset))
+        path.write_bytes(bytes(data[: int(len(data) * keep)]))
+    return write
+
+
+def _metaimage(*, keep: float = 1.0, detached: bool = False) -> Callable[[Path], None]:
+    """The bundled T1 volume as MetaImage (.mha, or .mhd + .raw), its pixel data cut to ``keep``."""
+    def write(path: Path) -> None:
+        import SimpleITK as sitk
+
+        sitk.WriteImage(sitk.ReadImage(str(ITK / "KmeansTest_T1UCharRaw.nii.gz")), str(path))
+        target = path.with_suffix(".raw") if detached else path
+        data = target.read_bytes()
+        target.write_bytes(data[: len(data) - int((1 - keep) * 128 * 128 * 62)])
+    return write
+
+
+def _dicom_series(*, skip: int | None = None) -> Callable[[Path], None]:
+    """The bundled T1 volume as a DICOM series (one file per slice, positions and orientation set), in the
+    folder ``path``; ``skip``: that slice's file left out, as a copy that lost a file leaves it."""
+    def write(path: Path) -> None:
+        from topomatch.stages.registration.io import keep_locale
+
+        with keep_locale():  # GDCM sets the process locale to "C" and leaves it (the test process's text I/O)
+            _write_series(path)
+
+    def _write_series(path: Path) -> None:
+        import SimpleITK as sitk
+
+        path.mkdir(parents=True, exist_ok=True)
+        img = sitk.Cast(sitk.RescaleIntensity(sitk.ReadImage(str(ITK / "KmeansTest_T1UCharRaw.nii.gz")), 0, 1000),
+                        sitk.sitkInt16)
+        d = img.GetDirection()
+        writer = sitk.ImageFileWriter()
+        writer.KeepOriginalImageUIDOn()
+        for k in range(img.GetDepth()):
+            if k == skip:
+                continue
+            piece = img[:, :, k]
+            for tag, value in (("0020|000e", "1.2.826.0.1.3680043.2.1125.1.7"), ("0020|000d", "1.2.826.0.1.3680043.2.1125.1"),
+                               ("0008|0060", "MR"), ("0020|0013", str(k)),
+                               ("0020|0037", "\\".join(map(str, (d[0], d[3], d[6], d[1], d[4], d[7])))),
+                               ("0020|0032", "\\".join(map(str, img.TransformIndexToPhysicalPoint((0, 0, k)))))):
+                piece.SetMetaData(tag, value)
+            writer.SetFileName(str(path / f"slice{k:03d}.dcm"))
+            writer.Execute(piece)
+    return write
+
+
+def volume_cases() -> list[Case]:
+    """3D inputs whose headers or files lie (the second hardening round: docs/hardening.md)."""
+    fixed = "{itk}/KmeansTest_T1UCharRaw.nii.gz"
+    cases = [
+        ("fifo-volume", {"m.nii.gz": lambda p: os.mkfifo(p)}, r"m\.nii\.gz: not a regular file", 1),
+        ("nii-zero-pixdim", {"m.nii": _volume_nii(pixdim=(0.0, 2.0, 3.0))}, r"m\.nii: .*pixdim.* 0, 2, 3", 1),
+        ("nii-negative-pixdim", {"m.nii": _volume_nii(pixdim=(2.0, -2.0, 3.0))}, r"m\.nii: .*pixdim.* 2, -2, 3", 1),
+        ("nii-nan-pixdim", {"m.nii": _volume_nii(pixdim=(float("nan"), 2.0, 3.0))}, r"m\.nii: .*pixdim.* nan", 1),
+        ("nii-no-orientation", {"m.nii": _volume_nii(orientation=False)}, r"m\.nii: .*neither a qform nor an sform",
+         None),
+        ("nii-truncated-3d", {"m.nii": _volume_nii(keep=0.6)}, r"m\.nii: truncated: the header declares 128 x 128 x 62", 1),
+        ("nii-offset-past-end", {"m.nii": _volume_nii(vox_offset=10_000_000)}, r"m\.nii: its data offset .* past the end", 1),
+        ("mha-truncated", {"m.mha": _metaimage(keep=0.5)}, r"m\.mha: truncated: .* m\.mha holds", 1),
+        ("mhd-raw-truncated", {"m.mhd": _metaimage(keep=0.5, detached=True)}, r"m\.mhd: truncated: .* m\.raw holds", 1),
+        ("dicom-missing-slice", {"series": _dicom_series(skip=30)}, r"series: .*not evenly spaced: 6 mm .* 3 mm apart", 1),
+    ]
+    out = [Case(f"volume-{cid}", "image", ["register", fixed, "{d}/" + next(iter(files))], code if code is not None
+                else 1, message, files) for cid, files, message, code in cases]
+    out.append(Case("volume-dicom-series-reads", "image", ["register", fixed, "{d}/series", "--json"], 0,
+                    r'"ok": true', {"series": _dicom_series()}))
+    pd = "{itk}/BrainProtonDensitySlice.png"
+    out.append(Case("image-out-target-is-a-folder", "image", ["register", pd, pd, "--out", "{d}/o"], 1,
+                    r"o/overlay\.png: is a folder, not a file", {"o/overlay.png/x.txt": "x"}))
+    out.append(Case("image-out-long-name", "image", ["register", pd, pd, "--out", "{d}/" + "o" * 250], 0, r"ok"))
+    out.append(Case("config-export-folder-parent", "config", ["validate", "{d}/c.yaml"], 2,
+                    r"export\.folder: '\.\.' is not a folder of its own",
+                    {"c.yaml": "name: e\ninputs: {meshes: ['{bundled}/meshes/torus.off']}\nstages: [load]\n"
+                               "reports: [{export: {folder: '..'}}]\n"}))
+    out.append(Case("database-labels-fifo", "database", ["index", "{meshes}/torus.off", "--db", "{d}/x.db", "--labels",
+                                                          "{d}/l.csv", "--method", "d2"], 1,
+                    r"l\.csv: not a regular file", {"l.csv": lambda p: os.mkfifo(p)}))
+    out.append(Case("config-fifo", "config", ["run", "{d}/c.yaml"], 1, r"c\.yaml: not a regular file",
+                    {"c.yaml": lambda p: os.mkfifo(p)}))
+    out.append(Case("config-fifo-input", "config", ["validate", "{d}/c.yaml"], 1, r"m\.nii\.gz: not a regular file",
+                    {"m.nii.gz": lambda p: os.mkfifo(p),
+                     "c.yaml": "name: fifo\ninputs:\n  pairs:\n    - {fixed: '{d}/m.nii.gz', moving: '{d}/m.nii.gz'}\n"
+                               "stages: [load_pair, register]\n"}))
+    return out
+
+
 def all_cases() -> list[Case]:
-    cases = mesh_cases() + config_cases() + image_cases() + cli_cases() + database_cases() + cache_cases()
+    cases = (mesh_cases() + config_cases() + image_cases() + volume_cases() + cli_cases() + database_cases()
+             + cache_cases())
     ids = [c.id for c in cases]
     assert len(ids) == len(set(ids)), "duplicate case ids"
     return cases

@@ -219,6 +219,32 @@ def test_shortlisted_query_ranks_as_the_exact_fusion_without_re_ranking(collecti
     assert [r["path"] for r in result.results] == [rows[j].path for j in np.argsort(exact, kind="stable")]
     assert len(index.shortlist()) == 6
 
+    def exact_order():
+        rows, descriptors = index.parts("topomatch")
+        mats = index.part_matrices("topomatch", descriptors)
+        i = next(j for j, r in enumerate(rows) if r.path.endswith("odedstein_human_woman.obj.gz"))
+        exact = fused_query([M[i] for M in mats], mats, replace(get_method("topomatch").fusion, rerank_k=None))
+        return [rows[j].path for j in np.argsort(exact, kind="stable")]
+
+    # what an index killed between its row commits and its graph save leaves: rows whose vectors are not the
+    # graph's (here two shapes' hks descriptors swapped in the database); the graph is brought up to date
+    import sqlite3
+    con = sqlite3.connect(db)
+    (a, da), (b, dbl) = con.execute("SELECT id, descriptor FROM shapes WHERE method = 'hks' ORDER BY id LIMIT 2")
+    con.execute("UPDATE shapes SET descriptor = ? WHERE id = ?", (dbl, a))
+    con.execute("UPDATE shapes SET descriptor = ? WHERE id = ?", (da, b))
+    con.commit()
+    con.close()
+    assert [r["path"] for r in index.query(query, k=6, shortlist=True).results] == exact_order()
+    # a graph of another dimension (a foreign or older file) is ignored with a warning, and rebuilt
+    from topomatch.stages.retrieval.shortlist import Shortlist, shape_key
+    keys = np.array([shape_key(r.path) for r in rows], dtype=np.uint64)
+    foreign = Shortlist.build(keys, {"x": np.ones((len(keys), 3))}, {"x": 1.0})
+    foreign.save(tmp_path / "index.db.ann")
+    with pytest.warns(UserWarning, match="index.db.ann: it embeds parts"):
+        result = index.query(query, k=6, shortlist=True)
+    assert [r["path"] for r in result.results] == exact_order()
+
 
 def test_labels_belong_to_files_and_unmatched_label_rows_are_reported(collection, tmp_path, capsys):
     db = tmp_path / "index.db"

@@ -71,6 +71,46 @@ def test_open3d_written_ply_reads_back(tmp_path, bundled_mesh, ascii):
     np.testing.assert_array_equal(mesh.F, ref.F)
 
 
+@pytest.mark.parametrize("coordinate, count, index", [("float", "uchar", "int"), ("double", "uchar", "int"),
+                                                       ("float32", "uint8", "uint32"), ("float", "ushort", "int"),
+                                                       ("double", "int", "int")])
+def test_big_endian_binary_ply_reads_as_the_mesh_it_holds(tmp_path, bundled_mesh, coordinate, count, index):
+    # MeshLab misreads these (double coordinates as 1e306, a ushort list count as a truncated file); written here
+    # by hand from the PLY specification, with a per-vertex property besides x, y, z
+    ref = bundled_mesh("eight_genus2.off")
+    types = {"float": ">f4", "float32": ">f4", "double": ">f8", "uchar": ">u1", "uint8": ">u1", "ushort": ">u2",
+             "int": ">i4", "uint32": ">u4"}
+    faces = list(ref.F)
+    head = (f"ply\nformat binary_big_endian 1.0\nelement vertex {ref.n_vertices}\n"
+            + "".join(f"property {coordinate} {a}\n" for a in ("x", "y", "z", "nx"))
+            + f"element face {len(faces)}\nproperty list {count} {index} vertex_indices\nend_header\n")
+    vertices = np.hstack([ref.V, np.zeros((ref.n_vertices, 1))]).astype(types[coordinate]).tobytes()
+    body = b"".join(np.array([len(f)], types[count]).tobytes() + np.asarray(f).astype(types[index]).tobytes()
+                    for f in faces)
+    path = tmp_path / "eight.ply"
+    path.write_bytes(head.encode() + vertices + body)
+    mesh, used = read_mesh(path)
+    assert used == "plyfile"
+    np.testing.assert_allclose(mesh.V, ref.V, rtol=1e-6 if coordinate != "double" else 0)
+    np.testing.assert_array_equal(mesh.F, ref.F)
+
+
+def test_a_damaged_big_endian_ply_is_an_input_error(tmp_path, bundled_mesh):
+    ref = bundled_mesh("eight_genus2.off")
+    head = (f"ply\nformat binary_big_endian 1.0\nelement vertex {ref.n_vertices}\nproperty float x\nproperty float y\n"
+            f"property float z\nelement face {ref.n_faces}\nproperty list uchar int vertex_indices\nend_header\n")
+    body = ref.V.astype(">f4").tobytes() + b"".join(b"\x03" + f.astype(">i4").tobytes() for f in ref.F)
+    rng = np.random.default_rng(1)
+    for k in range(20):  # byte flips in the face lists: an error naming the file, never a crash or a traceback
+        data = bytearray(body)
+        at = len(ref.V) * 12 + int(rng.integers(0, ref.n_faces)) * 13
+        data[at] = int(rng.integers(4, 255))  # a list count that is not 3: the rest of the faces shift
+        path = tmp_path / f"bad{k}.ply"
+        path.write_bytes(head.encode() + bytes(data))
+        with pytest.raises(InputError, match=f"bad{k}\\.ply"):
+            read_mesh(path)
+
+
 def test_bundled_obj_gz_reads(bundled_mesh):
     mesh = bundled_mesh("odedstein_spot_low_resolution.obj.gz")
     assert mesh.name == "odedstein_spot_low_resolution"

@@ -37,10 +37,34 @@ def test_incremental_add_replace_and_persistence(tmp_path):
     ann.add(keys[140:], {p: v[140:] for p, v in vectors.items()})  # 10 replaced, 50 new
     assert len(ann) == 200
     ann.save(tmp_path / "x.ann")
-    back = Shortlist.load(tmp_path / "x.ann")
-    assert back.parts == ("a", "b") and back.scales == {"a": 1.0, "b": 1.0} and len(back) == 200
+    back, problem = Shortlist.load(tmp_path / "x.ann")
+    assert problem is None and back.parts == ("a", "b") and back.scales == {"a": 1.0, "b": 1.0} and len(back) == 200
     assert back.search({p: v[170] for p, v in vectors.items()}, 1)[0] == keys[170]
-    assert Shortlist.load(tmp_path / "missing.ann") is None
+    assert Shortlist.load(tmp_path / "missing.ann") == (None, None)
+    # the graph knows which index rows it holds: nothing changed, then one row edited and one removed
+    assert [len(x) for x in back.changed(keys, vectors)] == [0, 0]
+    edited = {p: v.copy() for p, v in vectors.items()}
+    edited["a"][7] += 1.0
+    stale, gone = back.changed(keys[:-1], {p: v[:-1] for p, v in edited.items()})
+    assert stale.tolist() == [7] and gone == [int(keys[-1])]
+
+
+def test_a_graph_that_is_not_its_records_is_refused(tmp_path):
+    vectors = _clustered(50)
+    keys = np.array([shape_key(f"m{i}.off") for i in range(50)], dtype=np.uint64)
+    ann = Shortlist.build(keys, vectors, {"a": 1.0, "b": 1.0})
+    ann.save(tmp_path / "x.ann")
+    other = Shortlist.build(keys[:20], {p: v[:20] for p, v in vectors.items()}, {"a": 1.0, "b": 1.0})
+    other.index.save(str(tmp_path / "x.ann"))  # a graph saved without its record (an interrupted save)
+    back, problem = Shortlist.load(tmp_path / "x.ann")
+    assert back is None and "not the one its record was written with" in problem
+    (tmp_path / "y.ann").mkdir()
+    (tmp_path / "y.ann.json").write_text("{}")
+    assert Shortlist.load(tmp_path / "y.ann")[0] is None  # a folder where the graph should be
+    ann.save(tmp_path / "z.ann")
+    (tmp_path / "z.ann.json").write_text('{"schema": 2}')  # a record without its keys
+    back, problem = Shortlist.load(tmp_path / "z.ann")
+    assert back is None and "KeyError" in problem
 
 
 def test_keys_and_samples_are_stable():
