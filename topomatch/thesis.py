@@ -529,12 +529,15 @@ def reproduce(out: str | Path = "thesis", *, data_root: str | Path | None = None
     from topomatch.experiments import CONFIGS_DIR, load_config
     from topomatch.pipeline.runner import run_experiment
 
+    from topomatch.pipeline.files import check_writable_folder
+
     out = Path(out)
     items = [i for i in CATALOGUE if not only or any(_matches(i, s) for s in only)]
     unknown = [s for s in only or [] if not any(_matches(i, s) for i in CATALOGUE)]
     if unknown:  # every selector must name something, not only one of them
         raise ConfigError(f"no thesis figure or table matches {', '.join(unknown)}; ids look like "
                           f"'Fig. 3.9', '3.9' or 'Table 3.1', configs like 'robustness/noise'")
+    check_writable_folder(out)  # before anything runs: a page that cannot be written costs no run
     runs: dict[str, tuple[Path | None, str, float]] = {}
     for config in dict.fromkeys(c for i in items for c in i.configs):
         if progress:
@@ -594,13 +597,29 @@ def _relative(path: Path, out: Path) -> str:
         return path.resolve().as_posix()
 
 
+#: Fields of a page row and their types, as :meth:`Outcome.to_dict` writes them.
+ROW_FIELDS = {"id": str, "caption": str, "claim": str, "configs": list, "verdict": str, "measured": str,
+              "departures": list, "command": str, "files": list}
+
+
 def _existing_rows(out: Path) -> list[dict[str, Any]]:
-    """The rows of an earlier ``thesis.json`` in ``out`` (none when it is missing or unreadable)."""
+    """The rows of an earlier ``thesis.json`` in ``out`` that are rows of the catalogue as this version writes
+    them; a missing or unreadable file gives none, a row that is not (edited, older, foreign) is dropped with a
+    warning and is absent from the page until its item is run again."""
+    import warnings
+
     try:
         rows = json.loads((out / "thesis.json").read_text())
-        return [r for r in rows if isinstance(r, dict) and "id" in r] if isinstance(rows, list) else []
     except (OSError, ValueError):
         return []
+    known = {i.id for i in CATALOGUE}
+    good = [r for r in rows if isinstance(r, dict) and r.get("id") in known and r.get("verdict") in VERDICTS
+            and all(isinstance(r.get(k), t) for k, t in ROW_FIELDS.items())] if isinstance(rows, list) else []
+    dropped = (len(rows) if isinstance(rows, list) else 1) - len(good)
+    if dropped:
+        warnings.warn(f"{out / 'thesis.json'}: {dropped} earlier row(s) are not rows this version wrote and were "
+                      f"dropped; run those items again (topomatch thesis --only ...)", stacklevel=3)
+    return good
 
 
 def _matches(item: ThesisItem, selector: str) -> bool:
@@ -679,9 +698,11 @@ def write_page(out: Path, rows: list[dict[str, Any]]) -> None:
                 parts.append(f"<figure><a href='{esc(src)}' target='_blank'><img src='{esc(src)}' alt='{esc(f)}'></a><figcaption class='meta'>{esc(Path(f).name)}</figcaption></figure>")
             elif f.endswith(".csv"):
                 drawn[src] = r["id"]
-                table_rows = json.loads((out / f.replace(".csv", ".json")).read_text())
-                parts.append(f"<p>Table <a href='{esc(src)}'>{esc(Path(f).name)}</a></p>"
-                             + html_table(table_rows, limit=30))
+                try:
+                    shown = html_table(json.loads((out / f.replace(".csv", ".json")).read_text()), limit=30)
+                except (OSError, ValueError, TypeError, AttributeError):  # a run folder deleted or edited since
+                    shown = "<p class='meta'>(its JSON twin cannot be read: run the row again)</p>"
+                parts.append(f"<p>Table <a href='{esc(src)}'>{esc(Path(f).name)}</a></p>" + shown)
         meta = []
         if r.get("command"):
             meta.append(f"Re-run this row alone: <code>{esc(r['command'])}</code>")

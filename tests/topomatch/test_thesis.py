@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 
+import pytest
 from browser import dump_dom, needs_chromium, screenshot
 from cli_schema import check
 from topomatch.cli import main
@@ -105,3 +106,19 @@ def test_the_page_loads_every_image_without_script_errors(capsys, tmp_path, monk
     assert 'data-broken-images=""' in root and 'data-images="' in root and 'data-images="0"' not in root
     shot = screenshot(tmp_path / "thesis.html", "thesis_page.png", tmp_path)
     assert shot.is_file() and shot.stat().st_size > 10_000
+
+
+def test_a_damaged_page_record_loses_only_its_bad_rows(capsys, tmp_path, monkeypatch):
+    monkeypatch.delenv("TOPOMATCH_DATA_ROOT", raising=False)
+    assert main(["-q", "thesis", "--out", str(tmp_path), "--only", "3.2"]) == 0
+    rows = json.loads((tmp_path / "thesis.json").read_text())
+    rows[0]["files"].append("runs/gone/tables/missing.csv")  # a run folder deleted since
+    (tmp_path / "thesis.json").write_text(json.dumps(rows + [{"id": "Fig. 2.3"}, 5, {"id": "Fig. 9.9"}]))
+    with pytest.warns(UserWarning, match="3 earlier row.s. are not rows this version wrote"):
+        assert main(["thesis", "--out", str(tmp_path), "--only", "2.2"]) == 0
+    capsys.readouterr()
+    kept = [r["id"] for r in json.loads((tmp_path / "thesis.json").read_text())]
+    assert kept == ["Fig. 2.2", "Fig. 3.2"] and "cannot be read" in (tmp_path / "thesis.html").read_text()
+    (tmp_path / "page").write_text("a file where the page's folder should be")
+    assert main(["thesis", "--out", str(tmp_path / "page"), "--only", "2.2"]) == 1
+    assert "a file is in the way" in capsys.readouterr().err and not (tmp_path / "page.runs").exists()
