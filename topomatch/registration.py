@@ -241,7 +241,11 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     suffix = output_suffix(moving_path) if from_file else ".nii.gz"
     written: list[Path] = []
 
+    inputs = {Path(p).resolve() for p in (outcome.fixed, outcome.moving) if isinstance(p, (str, Path))}
+
     def save(path: Path, data: bytes | None = None, write=None) -> None:
+        if path.resolve() in inputs:  # --out next to the inputs: never write over one of them
+            raise InputError(path, "is one of the registration's input files: choose another --out folder")
         tmp = path.with_name(f".tmp-{path.name}")
         if data is not None:
             atomic_write_bytes(path, data)

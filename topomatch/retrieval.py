@@ -108,20 +108,30 @@ def usable_rows(rows: list[Row], method: str, db: str | Path) -> list[Row]:
     common = Counter(shape_key(r.descriptor) for r in read).most_common(1)
     expected = common[0][0] if common else None
     good, bad = [], []
+    seen: dict[str, int] = {}
     for r in rows:
         d = r.descriptor
-        if d is None:
+        want = {"vector": 1, "endpoints": 2}.get(r.kind or "")
+        if r.path in seen:
+            bad.append((r, f"the same mesh as row {seen[r.path]} (an answer would count it twice)"))
+        elif d is None:
             bad.append((r, r.problem or "no descriptor stored (NULL) on a row marked ok"))
+        elif d.dtype.kind != "f" or d.dtype.itemsize < 4:
+            bad.append((r, f"dtype {d.dtype}, not the floating-point array topomatch writes"))
+        elif want is not None and d.ndim != want:
+            bad.append((r, f"a {d.ndim}-D array in a row of kind {r.kind!r} (a {want}-D array is stored there)"))
         elif d.ndim not in (1, 2) or (d.ndim == 1 and d.size == 0):  # an endpoint table may have no rows
             bad.append((r, f"a descriptor of shape {d.shape}, not a vector or an endpoint table"))
         elif not np.all(np.isfinite(d)):
             bad.append((r, f"{int((~np.isfinite(d)).sum())} NaN or infinite values"))
         elif shape_key(d) != expected:
-            bad.append((r, f"shape {d.shape} where the other rows of {method} have {expected}"))
+            what = "length" if d.ndim == 1 else "columns per endpoint"
+            bad.append((r, f"shape {d.shape} where most rows of {method} have {what} {expected[0]}"))
         elif d.ndim == 2 and r.n_endpoints is not None and d.shape[0] != r.n_endpoints:
             bad.append((r, f"{d.shape[0]} endpoint rows where the row says {r.n_endpoints} endpoints"))
         else:
             good.append(r)
+        seen.setdefault(r.path, r.id)
     if bad:
         first, why = bad[0]
         raise InputError(db, f"row {first.id} ({first.path}) of {method}: {why}; {len(bad)} of the {len(rows)} "
@@ -457,6 +467,11 @@ class Collection:
         parts = get_method(method).parts
         indexed = {part: self._rows(part, method) for part in parts}
         common = set.intersection(*({r.path for r in rows} for rows in indexed.values()))
+        partial = set.union(*({r.path for r in rows} for rows in indexed.values())) - common
+        if partial:
+            warnings.warn(f"{self.db}: {len(partial)} mesh(es) lack a row of some part of {method} and are left out "
+                          f"(e.g. {sorted(partial)[0]}); run topomatch index on them with --method {method}",
+                          InputWarning, stacklevel=3)
         rows = [r for r in indexed[parts[0]] if r.path in common]
         descriptors = {}
         for part, part_rows in indexed.items():
@@ -504,6 +519,13 @@ class Collection:
         rows, descriptors = self.parts(method)
         t = time.perf_counter()
         query = {p: compute_descriptor(mesh, p, cache_dir(self.db))[0] for p in m.parts}
+        for p in m.parts:  # every stored row can agree with the others and still not be what this version computes
+            stored, made = descriptors[p][0].data, query[p].data
+            if stored.ndim != made.ndim or (stored.shape if stored.ndim == 1 else stored.shape[1:]) != \
+                    (made.shape if made.ndim == 1 else made.shape[1:]):
+                raise InputError(self.db, f"its {p} descriptors have shape {stored.shape}, and this version computes "
+                                          f"{made.shape} for the query: the index was made by another version or "
+                                          f"edited; delete it and run topomatch index again")
         t_desc = time.perf_counter() - t
         t = time.perf_counter()
         large = m.fusion is not None and (shortlist if shortlist is not None else len(rows) >= LARGE_INDEX)
@@ -564,7 +586,8 @@ class Collection:
         with ShapeIndex(self.db, readonly=True) as store:
             generation = store.generation()
         if (ann is not None and not refresh and generation is not None and ann.sample.get("generation") == generation
-                and ann.sample.get("settings") == settings):  # no row changed since the graph was saved
+                and ann.sample.get("settings") == settings and len(ann) == len(keys)
+                and bool(np.all(ann.index.contains(keys)))):  # this index, no row changed since the graph was saved
             d = ann.sample["decision"]
             return ann, keys, ann.sample["scales"], dataclasses.replace(FusionDecision.from_dict(d), rerank_k=None)
         # the rows changed (or the index cannot say): compare the graph's vectors with the rows', shape by shape

@@ -61,6 +61,7 @@ CREATE INDEX IF NOT EXISTS shapes_method ON shapes (method, params_hash, status)
 CREATE INDEX IF NOT EXISTS shapes_path ON shapes (path);
 CREATE TABLE IF NOT EXISTS index_state (key TEXT PRIMARY KEY, value INTEGER NOT NULL);
 INSERT OR IGNORE INTO index_state VALUES ('generation', 0);
+INSERT OR IGNORE INTO index_state VALUES ('index_id', abs(random()));
 CREATE TRIGGER IF NOT EXISTS shapes_inserted AFTER INSERT ON shapes
     BEGIN UPDATE index_state SET value = value + 1 WHERE key = 'generation'; END;
 CREATE TRIGGER IF NOT EXISTS shapes_updated AFTER UPDATE ON shapes
@@ -183,13 +184,18 @@ class ShapeIndex:
     def close(self) -> None:
         self.db.close()
 
-    def generation(self) -> int | None:
-        """How many changes the shapes table has seen (None for an index made before the counter existed)."""
+    def generation(self) -> list[int] | None:
+        """[this index's random id, how many changes its shapes table has seen]; None when the index cannot vouch
+        for it (made before the counter existed, a trigger removed, a value edited into something else)."""
         try:
-            row = self.db.execute("SELECT value FROM index_state WHERE key = 'generation'").fetchone()
+            triggers = {r[0] for r in self.db.execute("SELECT name FROM sqlite_master WHERE type = 'trigger'")}
+            values = dict(self.db.execute("SELECT key, value FROM index_state"))
         except sqlite3.Error:
             return None
-        return None if row is None else int(row[0])
+        if not {"shapes_inserted", "shapes_updated", "shapes_deleted"} <= triggers:
+            return None
+        state = [values.get("index_id"), values.get("generation")]
+        return state if all(isinstance(v, int) for v in state) else None
 
     def __enter__(self) -> "ShapeIndex":
         return self

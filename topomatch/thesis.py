@@ -608,13 +608,27 @@ def _existing_rows(out: Path) -> list[dict[str, Any]]:
     warning and is absent from the page until its item is run again."""
     import warnings
 
+    record = out / "thesis.json"
+    if not record.is_file():  # missing, or a FIFO / folder that reading would block on or fail
+        if record.exists():
+            warnings.warn(f"{record}: not a regular file; the page is written without earlier rows", stacklevel=3)
+        return []
     try:
-        rows = json.loads((out / "thesis.json").read_text())
-    except (OSError, ValueError):
+        rows = json.loads(record.read_text())
+    except (OSError, ValueError, RecursionError):
+        warnings.warn(f"{record}: unreadable; the page is written without earlier rows", stacklevel=3)
         return []
     known = {i.id for i in CATALOGUE}
-    good = [r for r in rows if isinstance(r, dict) and r.get("id") in known and r.get("verdict") in VERDICTS
-            and all(isinstance(r.get(k), t) for k, t in ROW_FIELDS.items())] if isinstance(rows, list) else []
+
+    def usable(r) -> bool:
+        return (isinstance(r, dict) and r.get("id") in known and r.get("verdict") in VERDICTS
+                and all(isinstance(r.get(k), t) for k, t in ROW_FIELDS.items())
+                and all(isinstance(f, str) for f in r["files"] + r["configs"] + r["departures"])
+                and (r.get("seconds") is None or (isinstance(r["seconds"], (int, float))
+                                                   and not isinstance(r["seconds"], bool)))
+                and all(r.get(k) is None or isinstance(r[k], str) for k in ("finished", "run_dir")))
+
+    good = [r for r in rows if usable(r)] if isinstance(rows, list) else []
     dropped = (len(rows) if isinstance(rows, list) else 1) - len(good)
     if dropped:
         warnings.warn(f"{out / 'thesis.json'}: {dropped} earlier row(s) are not rows this version wrote and were "

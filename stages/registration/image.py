@@ -137,9 +137,9 @@ class Image:
         finer than native), keeping at least ``min_size`` pixels per axis: a physical-space pyramid level."""
         factors = []
         for n, s in zip(self.size, self.spacing):
-            f = max(1, int(round(spacing / s)))
-            while f > 1 and n // f < min_size:
-                f -= 1
+            f = max(1, min(int(round(spacing / s)), n))  # never more than the axis has pixels
+            if n // f < min_size:  # the largest factor that keeps min_size pixels (was a countdown: hours for 1e-30 mm)
+                f = max(1, n // max(min_size, 1))
             factors.append(f)
         return self.shrink(factors)
 

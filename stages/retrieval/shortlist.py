@@ -69,6 +69,12 @@ def row_digests(vectors: dict[str, np.ndarray]) -> np.ndarray:
                      for row in stacked], dtype=np.uint64)
 
 
+def _record_digest(record: dict) -> str:
+    """SHA-256 of a shortlist record without its own digest field (canonical JSON)."""
+    body = {k: v for k, v in record.items() if k != "record_sha256"}
+    return hashlib.sha256(json.dumps(body, sort_keys=True).encode()).hexdigest()
+
+
 @dataclass
 class Shortlist:
     """An HNSW graph over the embeddings of an index's shapes, keyed by :func:`shape_key`.
@@ -159,10 +165,11 @@ class Shortlist:
         finally:
             tmp.unlink(missing_ok=True)
         table = np.array(sorted(self.digests.items()), dtype=np.uint64).reshape(-1, 2)
-        atomic_write_text(Path(f"{path}.json"), json.dumps({
-            "schema": 2, "parts": list(self.parts), "scales": self.scales, "sample": self.sample,
-            "ndim": int(self.index.ndim), "graph_sha256": graph,
-            "digests": base64.b64encode(table.astype("<u8").tobytes()).decode("ascii")}))
+        record = {"schema": 2, "parts": list(self.parts), "scales": self.scales, "sample": self.sample,
+                  "ndim": int(self.index.ndim), "graph_sha256": graph,
+                  "digests": base64.b64encode(table.astype("<u8").tobytes()).decode("ascii")}
+        record["record_sha256"] = _record_digest(record)
+        atomic_write_text(Path(f"{path}.json"), json.dumps(record))
 
     @classmethod
     def load(cls, path: Path) -> tuple["Shortlist | None", str | None]:
@@ -182,13 +189,15 @@ class Shortlist:
             info = json.loads(meta.read_text())
             if info.get("schema") != 2:
                 return None, f"record schema {info.get('schema')!r}, not 2 (an older or foreign file)"
+            if info.get("record_sha256") != _record_digest(info):
+                return None, "the record (.json) was edited after it was written"
             if hashlib.sha256(path.read_bytes()).hexdigest() != info["graph_sha256"]:
                 return None, "the graph is not the one its record was written with (an interrupted save or a copy)"
             parts = tuple(str(p) for p in info["parts"])
             scales = {p: float(info["scales"][p]) for p in parts}
             table = np.frombuffer(base64.b64decode(info["digests"]), dtype="<u8").reshape(-1, 2)
             index = Index.restore(str(path))
-        except (OSError, ValueError, RuntimeError, KeyError, TypeError, AttributeError) as exc:
+        except (OSError, ValueError, RuntimeError, KeyError, TypeError, AttributeError, RecursionError) as exc:
             return None, f"unreadable ({type(exc).__name__}: {exc})"
         if index is None or int(index.ndim) != int(info.get("ndim", -1)) or len(index) != len(table):
             return None, "the graph's size or dimension does not match its record"

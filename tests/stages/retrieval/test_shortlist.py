@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 from scipy.spatial.distance import cdist
 
@@ -64,7 +66,13 @@ def test_a_graph_that_is_not_its_records_is_refused(tmp_path):
     ann.save(tmp_path / "z.ann")
     (tmp_path / "z.ann.json").write_text('{"schema": 2}')  # a record without its keys
     back, problem = Shortlist.load(tmp_path / "z.ann")
-    assert back is None and "KeyError" in problem
+    assert back is None and "edited" in problem
+    ann.sample = {"scales": {"a": 1.0, "b": 1.0}}
+    ann.save(tmp_path / "w.ann")
+    record = json.loads((tmp_path / "w.ann.json").read_text())
+    record["sample"]["scales"]["a"] = 100.0  # a valid-looking value changed by hand: the ranking would change
+    (tmp_path / "w.ann.json").write_text(json.dumps(record))
+    assert Shortlist.load(tmp_path / "w.ann") == (None, "the record (.json) was edited after it was written")
 
 
 def test_keys_and_samples_are_stable():
