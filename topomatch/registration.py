@@ -214,6 +214,21 @@ def _stored_pixel_id(path: Path):
     return reader.GetPixelID()
 
 
+#: What ``write_registration_files`` writes into its folder (the resampled moving image: ``moving_resampled.*``).
+OUTPUT_NAMES = ("overlay.png", "registration.json", "transform.tfm")
+
+
+def check_outputs_spare_inputs(out: str | Path, *inputs: str | Path) -> None:
+    """Refuse an output folder where writing the registration's files would replace one of its inputs (before the
+    registration runs, so that nothing is computed for nothing)."""
+    folder = Path(out).resolve()
+    for p in inputs:
+        p = Path(p).resolve()
+        if p.parent == folder and (p.name in OUTPUT_NAMES or p.name.startswith("moving_resampled.")):
+            raise InputError(p, "is one of the registration's input files: writing --out there would replace it; "
+                                "choose another --out folder")
+
+
 def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> list[str]:
     """In ``out``: the moving image resampled onto the fixed grid, in the moving file's format
     (``moving_resampled`` + ``.png`` 8-bit for Pillow formats, with a float32 ``.tif`` beside it; the file's own

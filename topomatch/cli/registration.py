@@ -62,10 +62,11 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_register(args: argparse.Namespace) -> int:
-    from topomatch.registration import register_with, write_registration_files
+    from topomatch.registration import check_outputs_spare_inputs, register_with, write_registration_files
 
     if args.out:
         check_writable_folder(args.out)  # before the registration runs, not after
+        check_outputs_spare_inputs(args.out, args.fixed, args.moving)
     outcome = register_with(args.fixed, args.moving, given_options(args, _models(), _options()))
     summary = outcome.to_dict()
     if args.out:
