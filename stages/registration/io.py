@@ -245,8 +245,8 @@ def _check_geometry(path: Path, spacing, origin, direction) -> None:
     if not all(math.isfinite(o) for o in origin):
         raise InputError(path, f"origin {tuple(origin)} is not finite; fix the header")
     d = np.asarray(direction, dtype=float).reshape(len(spacing), len(spacing))
-    if not (np.all(np.isfinite(d)) and abs(np.linalg.det(d)) > 1e-6):
-        raise InputError(path, "direction matrix is not a rotation (non-finite or singular); fix the header")
+    if not (np.all(np.isfinite(d)) and np.allclose(d.T @ d, np.eye(len(d)), atol=1e-3)):
+        raise InputError(path, "direction matrix is not a rotation (non-finite, singular or sheared); fix the header")
 
 
 def _sitk_detail(exc: Exception) -> str:
@@ -465,8 +465,11 @@ def _raw_nifti_header(path: Path):
     import nibabel as nib
     from nibabel.openers import ImageOpener
 
-    with ImageOpener(str(path)) as f:
-        raw = f.read(540)
+    try:
+        with ImageOpener(str(path)) as f:
+            raw = f.read(540)
+    except Exception as exc:  # gzip's BadGzipFile / zlib.error / EOFError for a damaged or mislabelled .nii.gz
+        raise InputError(path, f"cannot read image ({type(exc).__name__}: {exc})") from None
     for cls in (nib.Nifti1Header, nib.Nifti2Header):
         for order in ("<", ">"):
             size = np.frombuffer(raw[:4], dtype=f"{order}i4")[0]
@@ -529,6 +532,8 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
         raise InputError(path, f"image is empty (shape {arr.shape})")
     if not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
         raise InputError(path, f"pixels are not numbers (dtype {arr.dtype})")
+    if np.iscomplexobj(arr):
+        raise InputError(path, f"pixels are complex numbers (dtype {arr.dtype}); register their magnitude or one part")
     data = np.ascontiguousarray(arr, dtype=np.float64)
     bad = ~np.isfinite(data)
     if bad.any():

@@ -702,6 +702,7 @@ def volume_cases() -> list[Case]:
         ("nii-vox-offset-zero", {"m.nii": _volume_nii(vox_offset=0)}, r"m\.nii: its data offset \(vox_offset 0\) lies inside", 1),
         ("nii-qoffset-nan", {"m.nii": _nifti_edit(qform_code=1, qoffset_x=float("nan"))}, r"m\.nii: the qform .* not finite", 1),
         ("nii-tiny-pixdim", {"m.nii": _volume_nii(pixdim=(1e-30, 1e-30, 1e-30))}, r"m\.nii: pixel spacing 1e-30", 1),
+        ("nii-gz-not-gzip", {"m.nii.gz": _png(16, 16)}, r"m\.nii\.gz: cannot read image \(BadGzipFile", 1),
         ("nii-gz-size-claim", {"m.nii.gz": _nifti_gz_claim((464, 464, 464))}, r"m\.nii\.gz: truncated: .* inflates to fewer", 1),
         ("mha-ndims-99", {"m.mha": "ObjectType = Image\nNDims = 99\nDimSize = 4 4 4\nElementType = MET_UCHAR\n"
                                    "ElementDataFile = LOCAL\n" + "x" * 64}, r"m\.mha: .*NDims = '99'", 1),
