@@ -94,6 +94,11 @@ def _save_quietly(ann, path: Path) -> None:
         pass
 
 
+def _descriptor_shape(a: np.ndarray) -> tuple:
+    """What every descriptor of one method shares: a vector's length, an endpoint table's columns per endpoint."""
+    return a.shape if a.ndim == 1 else a.shape[1:]
+
+
 def usable_rows(rows: list[Row], method: str, db: str | Path) -> list[Row]:
     """``rows``, after checking that each stored descriptor is what ``method`` makes: read, finite, of its kind
     and shape (a vector of the rows' common length; an (n, c) endpoint table with the rows' common column count
@@ -101,11 +106,8 @@ def usable_rows(rows: list[Row], method: str, db: str | Path) -> list[Row]:
     edited by hand or by another program) is an InputError that names the first such row and counts them."""
     from collections import Counter
 
-    def shape_key(a: np.ndarray) -> tuple:
-        return a.shape if a.ndim == 1 else a.shape[1:]
-
     read = [r for r in rows if r.descriptor is not None and r.descriptor.ndim in (1, 2)]
-    common = Counter(shape_key(r.descriptor) for r in read).most_common(1)
+    common = Counter(_descriptor_shape(r.descriptor) for r in read).most_common(1)
     expected = common[0][0] if common else None
     good, bad = [], []
     seen: dict[str, int] = {}
@@ -124,7 +126,7 @@ def usable_rows(rows: list[Row], method: str, db: str | Path) -> list[Row]:
             bad.append((r, f"a descriptor of shape {d.shape}, not a vector or an endpoint table"))
         elif not np.all(np.isfinite(d)):
             bad.append((r, f"{int((~np.isfinite(d)).sum())} NaN or infinite values"))
-        elif shape_key(d) != expected:
+        elif _descriptor_shape(d) != expected:
             what = "length" if d.ndim == 1 else "columns per endpoint"
             bad.append((r, f"shape {d.shape} where most rows of {method} have {what} {expected[0]}"))
         elif d.ndim == 2 and r.n_endpoints is not None and d.shape[0] != r.n_endpoints:
@@ -521,8 +523,7 @@ class Collection:
         query = {p: compute_descriptor(mesh, p, cache_dir(self.db))[0] for p in m.parts}
         for p in m.parts:  # every stored row can agree with the others and still not be what this version computes
             stored, made = descriptors[p][0].data, query[p].data
-            if stored.ndim != made.ndim or (stored.shape if stored.ndim == 1 else stored.shape[1:]) != \
-                    (made.shape if made.ndim == 1 else made.shape[1:]):
+            if stored.ndim != made.ndim or _descriptor_shape(stored) != _descriptor_shape(made):
                 raise InputError(self.db, f"its {p} descriptors have shape {stored.shape}, and this version computes "
                                           f"{made.shape} for the query: the index was made by another version or "
                                           f"edited; delete it and run topomatch index again")

@@ -13,7 +13,6 @@ import contextlib
 import locale
 from io import BytesIO
 import math
-import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -437,7 +436,7 @@ def _read_nifti(path: Path):
     reader = sitk.ImageFileReader()
     reader.SetFileName(str(path))
     try:
-        _check_nifti_header(path, _raw_nifti_header(path))  # before nibabel or ITK "repair" it on reading
+        check_header(path)  # the raw NIfTI header, before nibabel or ITK "repair" it on reading
         reader.ReadImageInformation()
         _check_data_size(path, reader, tuple(reader.GetSize()))
         data = np.asarray(nib.load(str(path)).dataobj)
