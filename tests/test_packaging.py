@@ -3,7 +3,10 @@ working from any folder."""
 
 from __future__ import annotations
 
+import json
 import os
+import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -15,25 +18,46 @@ from tests_paths import REPO_ROOT
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory):
-    """The wheel built from this checkout, unpacked (what pip installs into site-packages)."""
+def wheel(tmp_path_factory):
+    """The wheel built from this checkout, as ``pip install .`` builds it."""
     out = tmp_path_factory.mktemp("wheel")
     source = out / "source"  # a copy: setuptools builds in the source tree (build/, *.egg-info)
     shutil.copytree(REPO_ROOT, source, ignore=shutil.ignore_patterns(
         ".git", ".venv", "runs", "build", "dist", "*.egg-info", "__pycache__", ".pytest_cache", ".ruff_cache"))
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w", str(out),
                     str(source)], check=True, capture_output=True, timeout=600)
-    (wheel,) = out.glob("topomatch-*.whl")
-    site = out / "site"
+    (built,) = out.glob("topomatch-*.whl")
+    return built
+
+
+@pytest.fixture(scope="module")
+def installed(wheel):
+    """The wheel, unpacked (what pip installs into site-packages)."""
+    site = wheel.parent / "site"
     with zipfile.ZipFile(wheel) as z:
         z.extractall(site)
     return site
 
 
-def _python(site, code, cwd):
+@pytest.fixture(scope="module")
+def pip_installed(wheel):
+    """The wheel installed by pip into a folder of its own, with its ``bin/topomatch`` command (the dependencies
+    are the current environment's)."""
+    target = wheel.parent / "target"
+    subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-index", "-q",
+                    "--target", str(target), str(wheel)], check=True, capture_output=True, timeout=600)
+    return target
+
+
+def _env(site) -> dict[str, str]:
+    """The environment of a user of the installed package: only ``site`` on the path, no data root."""
     env = {**os.environ, "PYTHONPATH": str(site)}
     env.pop("TOPOMATCH_DATA_ROOT", None)
-    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=cwd, env=env,
+    return env
+
+
+def _python(site, code, cwd):
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=cwd, env=_env(site),
                           timeout=600)
 
 
@@ -52,7 +76,8 @@ def test_the_wheel_is_one_package_with_its_data(installed):
 def test_the_installed_package_works_from_any_folder(installed, tmp_path):
     code = ("import topomatch, os, sys\n"
             "assert topomatch.__file__.startswith(os.environ['PYTHONPATH'])\n"
-            "p = os.path.join(os.path.dirname(topomatch.__file__), 'data', 'meshes', 'torus.off')\n"
+            "p = topomatch.data_path('torus.off')\n"
+            "assert str(p).startswith(os.environ['PYTHONPATH']), p\n"
             "print(topomatch.skeleton(topomatch.read_mesh(p)).cycle_rank)\n"
             "from topomatch.cli import main\n"
             "sys.exit(main(['run', 'configs/registration/demo.yaml', '--out', 'runs', '--no-progress']))\n")
@@ -60,3 +85,48 @@ def test_the_installed_package_works_from_any_folder(installed, tmp_path):
     assert r.returncode == 0, r.stderr
     assert r.stdout.splitlines()[0] == "1"
     assert list((tmp_path / "runs").glob("registration-demo-*/index.html"))
+
+
+def _blocks(doc: str, language: str) -> list[str]:
+    """The fenced ``language`` code blocks of ``doc`` (a file of the repository)."""
+    return re.findall(rf"^```{language}\n(.*?)^```", (REPO_ROOT / doc).read_text(), re.S | re.M)
+
+
+def _commands(block: str) -> list[list[str]]:
+    """The shell commands of a bash block: continuation lines joined, comments dropped."""
+    return [shlex.split(line, comments=True) for line in block.replace("\\\n", " ").splitlines() if line.strip()]
+
+
+@pytest.mark.slow
+def test_the_docs_examples_run_from_an_empty_folder_with_the_installed_wheel(pip_installed, tmp_path):
+    """The README's command-line and Python examples on bundled data and docs/api.md's Python tour, as the docs
+    write them (``/tmp/`` moved into a temporary folder), run from an empty folder where only the installed wheel
+    is importable: this breaks when the docs drift or name files of the checkout."""
+    work = tmp_path / "work"
+    work.mkdir()
+
+    def run(argv, what):
+        r = subprocess.run(argv, capture_output=True, text=True, cwd=work, env=_env(pip_installed), timeout=300)
+        assert r.returncode == 0 and "Traceback" not in r.stderr, f"{what}\n{r.stderr[-3000:]}"
+        return r.stdout
+
+    # the installed package, not the checkout (which the environment may also have installed, editable)
+    where = "import os, topomatch; assert topomatch.__file__.startswith(os.environ['PYTHONPATH']), topomatch.__file__\n"
+
+    # the README's commands on bundled data ("bundled:NAME"), in their order (query and evaluate need the index)
+    (block,) = [b for b in _blocks("README.md", "bash") if "bundled:" in b]
+    commands = [c for c in _commands(block.replace("/tmp/", f"{tmp_path}/")) if c[1] != "run"]  # run: a 200 s config
+    assert sum("bundled:" in " ".join(c) for c in commands) >= 7
+    assert all(c[0] == ".venv/bin/topomatch" for c in commands)
+    for command in commands:
+        out = run([str(pip_installed / "bin" / "topomatch"), *command[1:]], shlex.join(command))
+        if command[1] == "skeleton" and "--json" in command:
+            assert json.loads(out)["mesh"].startswith(str(pip_installed))  # the installed data, not data/
+
+    # the Python examples: the README's, then docs/api.md's tour (its blocks in order, one script)
+    for doc in ("README.md", "docs/api.md"):
+        blocks = [b for b in _blocks(doc, "python") if doc != "README.md" or "data_path(" in b]
+        assert blocks and "data_path(" in blocks[0] and "data/meshes" not in "".join(blocks)
+        run([sys.executable, "-c", where + "".join(blocks).replace("/tmp/", f"{tmp_path}/")], doc)
+    assert (tmp_path / "shapes.db").is_file() and (work / "shapes.topomatch.npz").is_file()
+    assert list((work / "runs").glob("demo-*/index.html"))

@@ -3,7 +3,7 @@
 The Python API (the same operations, options and defaults as the command line)::
 
     import topomatch
-    mesh = topomatch.read_mesh("hand.obj.gz")
+    mesh = topomatch.read_mesh("hand.obj.gz")                   # or a bundled one: topomatch.data_path("torus.off")
     sk = topomatch.skeleton(mesh, function="fiedler")          # sk.n_endpoints, sk.graph, sk.to_dict()
     topomatch.match("cat.obj", "dog.obj").dissimilarity
     topomatch.index(["meshes/"], "shapes.db")                   # the best method by default
@@ -45,7 +45,7 @@ _API = {
     "read_volume": "topomatch.registration", "VolumeRegistrationOutcome": "topomatch.registration",
     "write_volume_registration_files": "topomatch.registration",
     "run_config": "topomatch.experiments", "load_config": "topomatch.experiments",
-    "bundled_configs": "topomatch.experiments",
+    "bundled_configs": "topomatch.experiments", "data_path": "topomatch.pipeline.paths",
     "METHODS": "topomatch.stages.retrieval.catalogue",
     "TopomatchError": "topomatch.pipeline.errors", "InputError": "topomatch.pipeline.errors",
     "ConfigError": "topomatch.pipeline.errors", "StageError": "topomatch.pipeline.errors",

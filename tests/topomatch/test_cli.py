@@ -3,15 +3,20 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
 import pytest
 
+from tests_paths import REPO_ROOT
+
 
 def topomatch(*args, cwd=None):
+    """The command, run from ``cwd`` (default: here) on this checkout (not whatever the environment installed)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO_ROOT), os.environ.get("PYTHONPATH")]))}
     return subprocess.run([sys.executable, "-m", "topomatch", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd, timeout=300)
+                          capture_output=True, text=True, cwd=cwd, env=env, timeout=300)
 
 
 def test_help_everywhere():
@@ -172,3 +177,33 @@ def test_the_command_reports_a_recomputed_cache_entry_as_its_own_warning(tmp_pat
     corrupt_cache()
     done = topomatch("-q", "query", mesh, "--db", db, "--method", "d2")
     assert done.returncode == 0 and done.stderr == "" and "torus.off" in done.stdout
+
+
+def test_bundled_names_work_from_any_folder_and_an_unknown_one_names_the_closest(tmp_path):
+    r = topomatch("skeleton", "bundled:torus.off", "--json", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["mesh"].endswith("/meshes/torus.off") and json.loads(r.stdout)["cycle_rank"] == 1
+    r = topomatch("match", "bundled:meshes/torus.off", "bundled:nope.off", cwd=tmp_path)
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    assert r.stderr.startswith("topomatch: error: bundled:nope.off: not among the bundled data")
+    assert "closest: meshes/torus.off" in r.stderr
+    r = topomatch("index", "bundled:meshes", "--db", tmp_path / "s.db", "--labels", "bundled:../pyproject.toml",
+                  "--json")
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    error = json.loads(r.stdout)
+    assert error["kind"] == "input" and error["file"] == "bundled:../pyproject.toml" and "outside" in error["error"]
+    assert not (tmp_path / "s.db").exists()  # refused while reading the command line, before any work
+
+
+def test_every_input_argument_takes_bundled_names():
+    """``common.input_path`` is where the command line resolves ``bundled:NAME``: every input file or folder
+    argument uses it (configs are found by name instead: ``topomatch configs``)."""
+    from topomatch.cli import build_parser
+    from topomatch.cli.common import input_path
+
+    inputs = set()
+    for command in ("skeleton", "match", "index", "query", "evaluate", "register", "run", "validate", "thesis"):
+        sub = build_parser(command)._subparsers._group_actions[0].choices[command]
+        inputs |= {(command, a.dest) for a in sub._actions if a.type is input_path}
+    assert inputs == {("skeleton", "mesh"), ("match", "a"), ("match", "b"), ("index", "paths"), ("index", "labels"),
+                      ("query", "mesh"), ("register", "fixed"), ("register", "moving")}

@@ -116,7 +116,13 @@ def main(argv: list[str] | None = None) -> int:
         keep_freed_memory()
     argv = sys.argv[1:] if argv is None else list(argv)
     Parser.json_errors = "--json" in argv
-    args = build_parser(_command_name(argv)).parse_args(argv)
+    common.reset()
+    try:
+        args = build_parser(_command_name(argv)).parse_args(argv)
+    except TopomatchError as exc:  # an input argument that names nothing (bundled:NAME, common.input_path): status 1
+        if "--debug" in argv:
+            raise
+        return _fail(argparse.Namespace(json=Parser.json_errors), str(exc), exc.exit_code, exc.kind, exc)
     level = -1 if args.quiet else (args.verbose or 0)
     common.reset(level)
     logging.basicConfig(format="topomatch: %(levelname)s: %(name)s: %(message)s",

@@ -75,6 +75,23 @@ def path_argument(text: str) -> str:
     return text
 
 
+def input_path(text: str) -> str:
+    """An argparse type for an input file or folder: refuses the empty string, and turns ``bundled:NAME`` into
+    the path of the bundled data file (or folder) it names (:func:`topomatch.data_path`), so the examples work
+    from any folder. Every command's input arguments use it: this is where the command line resolves them.
+
+    Raises
+    ------
+    InputError
+        ``bundled:NAME`` names nothing bundled (the message lists the closest bundled files); the command
+        exits with 1, as for any missing input (:func:`topomatch.cli.main`).
+    """
+    from topomatch.pipeline.paths import BUNDLED_PREFIX, data_path
+
+    path_argument(text)
+    return str(data_path(text)) if text.startswith(BUNDLED_PREFIX) else text
+
+
 def _finite(value: Any) -> Any:
     """``value`` with every NaN or infinite float replaced by None (JSON has no NaN)."""
     if isinstance(value, float):

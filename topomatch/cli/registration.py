@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import argparse
 
-from topomatch.cli.common import command, path_argument, print_result
+from topomatch.cli.common import command, input_path, path_argument, print_result
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 from topomatch.pipeline.errors import TopomatchError
 from topomatch.pipeline.files import check_writable_folder
@@ -51,9 +51,9 @@ def add_parsers(sub) -> None:
 
 
 def _arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("fixed", help="fixed (reference) image or volume: PNG, TIFF, NIfTI, DICOM (file or series folder), "
-                                 "MetaImage, NRRD")
-    p.add_argument("moving", help="moving (target) image or volume")
+    p.add_argument("fixed", type=input_path, help="fixed (reference) image or volume: PNG, TIFF, NIfTI, DICOM (file or "
+                                                  "series folder), MetaImage, NRRD; bundled:NAME for a bundled one")
+    p.add_argument("moving", type=input_path, help="moving (target) image or volume")
     add_options(p, _models(), _options())
     p.add_argument("--out", type=path_argument, metavar="DIR", help="write the moving image resampled on the fixed grid "
                    "(moving_resampled in the moving file's format; PNG also as a float32 .tif), transform.tfm, "

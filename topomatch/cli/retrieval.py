@@ -11,7 +11,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from topomatch.cli.common import command, path_argument, print_json, verbosity, warn
+from topomatch.cli.common import command, input_path, path_argument, print_json, verbosity, warn
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 
@@ -92,8 +92,8 @@ def positive_int(text: str) -> int:
 def _match_arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_PAIR_METHOD
 
-    p.add_argument("a", help="first mesh")
-    p.add_argument("b", help="second mesh")
+    p.add_argument("a", type=input_path, help="first mesh (bundled:NAME for a bundled one)")
+    p.add_argument("b", type=input_path, help="second mesh")
     _method_arg(p, DEFAULT_PAIR_METHOD, fusions=False)  # a fusion's scales come from a collection
     _with_match_options(p)
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -102,11 +102,12 @@ def _match_arguments(p: argparse.ArgumentParser) -> None:
 def _index_arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
 
-    p.add_argument("paths", nargs="+", help="mesh files or folders (searched recursively)")
+    p.add_argument("paths", nargs="+", type=input_path, help="mesh files or folders (searched recursively); "
+                                                             "bundled:meshes for the bundled meshes")
     p.add_argument("--db", type=path_argument, required=True, help="index file (SQLite), created if missing")
     _method_arg(p, DEFAULT_METHOD)
-    p.add_argument("--labels", type=path_argument, help="CSV with columns relative_path (or path) and class (or label), paths "
-                                    "relative to the CSV's folder")
+    p.add_argument("--labels", type=input_path, help="CSV with columns relative_path (or path) and class (or label), "
+                                                     "paths relative to the CSV's folder")
     add_options(p, _models(), EXECUTOR_OPTIONS)
     p.add_argument("--retry-failed", action="store_true", help="recompute meshes recorded as failed")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar (also hidden by -q)")
@@ -116,7 +117,7 @@ def _index_arguments(p: argparse.ArgumentParser) -> None:
 def _query_arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD
 
-    p.add_argument("mesh", help="query mesh")
+    p.add_argument("mesh", type=input_path, help="query mesh")
     p.add_argument("--db", type=path_argument, required=True, help="index file")
     p.add_argument("-k", type=positive_int, default=10, help="results to show (default 10)")
     _method_arg(p, DEFAULT_METHOD)

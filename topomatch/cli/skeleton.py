@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import argparse
 
-from topomatch.cli.common import command, path_argument, print_result, warn
+from topomatch.cli.common import command, input_path, path_argument, print_result, warn
 from topomatch.pipeline.cli_options import add_options, given_options
 from topomatch.pipeline.files import check_writable_folder
 
@@ -35,7 +35,8 @@ def add_parsers(sub) -> None:
 def _arguments(p: argparse.ArgumentParser) -> None:
     from topomatch.skeletons import SKELETON_OPTIONS
 
-    p.add_argument("mesh", help="mesh file (OFF, OBJ, PLY, STL, optionally .gz)")
+    p.add_argument("mesh", type=input_path,
+                   help="mesh file (OFF, OBJ, PLY, STL, optionally .gz; bundled:NAME for a bundled one)")
     add_options(p, _models(), SKELETON_OPTIONS)
     p.add_argument("--out", type=path_argument, metavar="DIR",
                    help="write skeleton.FMT and reeb.FMT (the unpruned Reeb graph) for each --format, and skeleton.png")
