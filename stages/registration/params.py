@@ -142,11 +142,20 @@ class CheckSpec(Params):
     min_content: float = Field(0.2, ge=0, le=1, allow_inf_nan=False,
                                description="flag a result that maps less than this fraction of the fixed image's "
                                            "content (Otsu foreground) onto the moving image's content")
-    min_structure: float = Field(0.04, ge=0, allow_inf_nan=False,
+    min_structure: float = Field(0.06, ge=0, allow_inf_nan=False,
                                  description="flag a pair in which either image has less structure inside its "
                                              "outline than this (interior over outline gradient, structure.py): a "
                                              "mask or silhouette, whose outline alone fixes the transform only as "
                                              "well as the two outlines correspond (0: off)")
+    outline_gap: float = Field(1.25, ge=0, allow_inf_nan=False,
+                               description="such a pair is flagged when the two outlines lie farther apart than this "
+                                           "(physical units, mean) at the result: the answer is as uncertain as "
+                                           "the gap (a dilated or differently thresholded mask); 0 flags every "
+                                           "such pair")
+    outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
+                                description="such a pair is flagged when a coarser level's measure is lower at the "
+                                            "result than at its own end by more than this fraction (the "
+                                            "consistency measure): its finer levels left the optimum it found")
     min_prominence: float = Field(6.0, ge=0, allow_inf_nan=False,
                                   description="flag a result less than this many median absolute deviations above "
                                               "the coarse search's median")

@@ -26,7 +26,7 @@ from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from topomatch.stages.registration.structure import interior_structure
+from topomatch.stages.registration.structure import interior_structure, outline_gap
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -513,22 +513,35 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
-    """Either image's only structure is its outline (a mask, a silhouette): the result rests on the outline alone."""
-    threshold = run.params.check.min_structure
-    if threshold <= 0:
+    """Either image's only structure is its outline (a mask, a silhouette) and that outline does not pin the result
+    down: the two outlines lie more than ``check.outline_gap`` apart at the result (a dilated or differently
+    thresholded mask: the answer is as uncertain as the gap), or the finer levels left the optimum a coarser level
+    found (the consistency measure above ``check.outline_drop``). Such a pair passing both is accepted."""
+    c = run.params.check
+    if c.min_structure <= 0:
         return []
-    flags = []
+    flat = []
     for role, image in (("fixed", run.fixed), ("moving", run.moving)):
         structure = interior_structure(image)  # NaN: no interior or no outline to compare (not flagged)
         if math.isfinite(structure):
             run.measures[f"structure_{role}"] = structure
-        if structure < threshold:
-            flags.append(Flag("outline", f"the {role} image has almost no structure inside its outline (interior "
-                                         f"gradient {structure:.3f} of the outline's; min_structure {threshold:g}): a "
-                                         f"mask or silhouette, which fixes the transform only as well as its outline "
-                                         f"matches the other image's, often not to a pixel; check the overlay, or set "
-                                         f"check.min_structure 0 to accept such pairs"))
-    return flags
+        if structure < c.min_structure:
+            flat.append(f"the {role} image has almost no structure inside its outline (interior gradient "
+                        f"{structure:.3f} of the outline's; min_structure {c.min_structure:g})")
+    if not flat:
+        return []
+    gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, RigidTransform(tuple(theta),
+                                                                                          tuple(run.center)))
+    drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
+    why = ([f"the outlines lie {gap:.2f} units apart at the result (outline_gap {c.outline_gap:g}): the answer is "
+            f"as uncertain as that" if math.isfinite(gap) else "the outlines cannot be compared at the result"]
+           if not gap <= c.outline_gap else []) + \
+          ([f"the finest level left the optimum a coarser level found (its measure {drop:.1%} lower there; "
+            f"outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else [])
+    if not why:
+        return []
+    return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "
+                            f"or set check.min_structure 0 to accept such pairs")]
 
 
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:

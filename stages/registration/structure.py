@@ -1,12 +1,14 @@
-"""How much of an image's structure lies inside its outline: a mask or silhouette has none.
+"""How much of an image's structure lies inside its outline (a mask or silhouette has none), and how far apart
+two objects' outlines lie under a transform.
 
 A moving image whose only structure is the object's outline (a binary mask, a silhouette) pins a rigid
 transform only as well as its outline corresponds to the other image's; the self-check's ``outline`` test
-(``register.check_outline``) flags such pairs. :func:`interior_structure` is the mean gradient magnitude
-inside the object (its Otsu content closed, holes filled, eroded) over that on the object's outline, on the
-image smoothed by one pixel. On the corpus's tune split (``docs/registration.md``) silhouettes scored 0.009-0.03
-(three outliers higher), T1, T2, label maps and thresholded images 0.07-0.6, PD images 0.04-0.4 and
-saturated ones 0.01-0.3 (nearly uniform inside); masks made from the ITK slices 0-0.03.
+(``register.check_outline``) asks :func:`interior_structure` whether a pair is such, and then
+:func:`outline_gap` whether the outlines correspond at the result. ``interior_structure`` is the mean gradient
+magnitude inside the object (its Otsu content closed, holes filled, eroded) over that on the object's outline,
+on the image block-averaged by 2 and smoothed by one pixel. On the corpus's tune split (``docs/registration.md``)
+silhouettes scored 0.009-0.03 (three outliers higher), T1, T2, label maps and thresholded images 0.07-0.6, PD
+images 0.04-0.4 and saturated ones 0.01-0.3 (nearly uniform inside); masks made from the ITK slices 0-0.03.
 
 Written with numpy (box grows, a geodesic flood fill, ``image.gaussian_blur``): ``scipy.ndimage`` would cost
 a 2D registration 0.12-0.18 s of import, as much as the registration.
@@ -17,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 
 from topomatch.stages.registration.image import Image, foreground_mask, gaussian_blur, grow
+from topomatch.stages.registration.interpolation import resample
+from topomatch.stages.registration.transform import RigidTransform
 
 CLOSING = 2.0
 """The content is closed by this many pixels (of the analysed copy) before its holes are filled."""
@@ -24,6 +28,8 @@ BAND = 2.0
 """Half-width (pixels) of the outline band."""
 ERODE = 3.0
 """The interior is the object eroded by this many pixels."""
+GAP_BAND = 4.0
+""":func:`outline_gap` compares the objects within this many pixels of the fixed outline."""
 
 
 def fill_holes(mask: np.ndarray) -> np.ndarray:
@@ -45,17 +51,27 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
         outside = grown
 
 
+def object_mask(image: Image) -> np.ndarray:
+    """The object of ``image`` (bool, its shape): the content (:func:`~.image.foreground_mask`) closed by
+    :data:`CLOSING` pixels with its holes filled. Computed once per image."""
+    cached = image.__dict__.get("_object_mask")
+    if cached is None:
+        unit = (1.0,) * image.dim
+        cached = fill_holes(~grow(~grow(foreground_mask(image), CLOSING, unit), CLOSING, unit))
+        object.__setattr__(image, "_object_mask", cached)
+    return cached
+
+
 def interior_structure(image: Image) -> float:
     """Mean gradient magnitude inside the object over its mean on the object's outline (unit-free, >= 0).
 
-    The image is block-averaged by 2 along axes of at least 48 pixels and smoothed by one pixel; the object
-    is the content (:func:`~.image.foreground_mask`) closed by :data:`CLOSING` pixels with its holes filled;
-    the outline band is :data:`BAND` pixels either side of its edge, the interior the object eroded by
-    :data:`ERODE`. NaN when either is empty (an object smaller than the band, or filling the grid)."""
+    The image is block-averaged by 2 along axes of at least 48 pixels; the object is that copy's
+    (:func:`object_mask`), the gradient the copy's smoothed by one pixel; the outline band is :data:`BAND` pixels
+    either side of the object's edge, the interior the object eroded by :data:`ERODE`. NaN when either is empty
+    (an object smaller than the band, or filling the grid)."""
     small = image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
+    obj = object_mask(small)
     unit = (1.0,) * small.dim
-    content = foreground_mask(small)
-    obj = fill_holes(~grow(~grow(content, CLOSING, unit), CLOSING, unit))
     band = grow(obj, BAND, unit) & grow(~obj, BAND, unit)
     inside = ~grow(~obj, ERODE, unit)
     if band.sum() < 10 or inside.sum() < 10:
@@ -64,3 +80,23 @@ def interior_structure(image: Image) -> float:
     magnitude = np.sqrt(sum(g ** 2 for g in gradient))
     edge = float(np.mean(magnitude[band]))
     return float(np.mean(magnitude[inside]) / edge) if edge > 0 else float("nan")
+
+
+def outline_gap(fixed: Image, moving: Image, transform: RigidTransform) -> float:
+    """Mean distance (physical units) between the two objects' outlines (:func:`object_mask`) with ``moving``
+    mapped by ``transform`` (``moving(T(p))`` at fixed p): the area (volume) between them over the fixed outline's
+    length (area, the indicator's total variation), within :data:`GAP_BAND` pixels of the fixed outline (outlines
+    farther apart saturate: the test needs to know a gap of a pixel or two) and where the mapped moving object is
+    defined. A mask grown by r against itself scores r; identical objects score about a third of a pixel after a
+    rotation (the pixel grid); NaN when the fixed object has no outline there."""
+    fixed_object, moving_object = object_mask(fixed), object_mask(moving)
+    unit = (1.0,) * fixed.dim
+    near = np.flatnonzero(grow(fixed_object, GAP_BAND, unit) & grow(~fixed_object, GAP_BAND, unit))
+    mapped = resample(moving.with_data(moving_object.astype(np.float64)), transform, fixed, fill=np.nan, flat=near)
+    defined = np.isfinite(mapped)
+    slope = np.sqrt(sum(g ** 2 for g in np.gradient(fixed_object.astype(np.float64), *fixed.spacing[::-1])))
+    outline = float(slope.ravel()[near][defined].sum())
+    if outline <= 0:
+        return float("nan")
+    between = float(np.abs(fixed_object.ravel()[near][defined] - mapped[defined]).sum())
+    return between / outline

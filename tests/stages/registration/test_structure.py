@@ -8,7 +8,7 @@ from scipy import ndimage
 
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.image import gaussian_blur
-from topomatch.stages.registration.structure import fill_holes, interior_structure
+from topomatch.stages.registration.structure import fill_holes, interior_structure, outline_gap
 
 
 @pytest.mark.parametrize("shape", [(40, 50), (20, 25, 30)])
@@ -22,6 +22,29 @@ def test_gaussian_blur_and_fill_holes_equal_scipy(shape):
                                atol=1e-12)
     mask = ndimage.binary_dilation(rng.uniform(size=shape) < 0.05, iterations=2)
     assert np.array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask, structure=np.ones((3,) * len(shape))))
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_outline_gap_of_a_grown_or_shifted_ball(d):
+    """A ball of radius R against the same ball grown by r (its edge r outside): the gap is r; against itself
+    shifted by s (small): the area between the outlines over the outline's length, 2s/pi in 2D (lune area 4Rs over
+    2 pi R), s/2 in 3D (2 pi R^2 s over 4 pi R^2); against itself, 0. Up to the pixel grid (the analysed copy is
+    block-averaged by 2; the outline length is the indicator's total variation)."""
+    from topomatch.stages.registration.transform import RigidTransform
+
+    shape = (96, 100, 90)[:d]
+    grids = np.meshgrid(*[np.arange(n) - (n - 1) / 2 for n in shape], indexing="ij")
+    radius = np.sqrt(sum(g ** 2 for g in grids))
+    fixed = Image(np.where(radius < 30, 100.0, 0.0))
+    identity = RigidTransform.identity(fixed.center)
+    assert outline_gap(fixed, fixed, identity) < 0.2
+    for r in (2.0, 4.0):
+        assert outline_gap(fixed, Image(np.where(radius < 30 + r, 100.0, 0.0)), identity) == pytest.approx(r, rel=0.15)
+    s_ = 4.0
+    shifted = RigidTransform(identity.parameters[: len(identity.parameters) - d] + (s_,) + (0.0,) * (d - 1),
+                             fixed.center)
+    expected = 2 * s_ / np.pi if d == 2 else s_ / 2
+    assert outline_gap(fixed, fixed, shifted) == pytest.approx(expected, rel=0.15)
 
 
 @pytest.mark.parametrize("d", [2, 3])
@@ -40,7 +63,10 @@ def test_a_silhouette_has_no_inside_an_image_with_a_pattern_has_one(d):
     assert interior_structure(Image(7.0 * (pattern + 5.0))) == pytest.approx(interior_structure(Image(pattern)))
 
 
-def test_a_silhouette_moving_image_is_flagged_and_the_check_can_be_turned_off(pd_slice):
+def test_a_silhouette_pair_is_flagged_when_its_levels_disagree_and_the_check_can_be_turned_off(pd_slice):
+    """``outline_gap 0`` flags every silhouette pair; by default the flag follows the recorded measures (the
+    outlines' gap at the result above ``outline_gap``, or the finest level left a coarser level's optimum by
+    more than ``outline_drop``); ``min_structure 0`` turns the test off."""
     from topomatch.stages.registration.misalign import moved
     from topomatch.stages.registration.params import RegisterParams
     from topomatch.stages.registration.register import register
@@ -48,8 +74,11 @@ def test_a_silhouette_moving_image_is_flagged_and_the_check_can_be_turned_off(pd
 
     silhouette = Image(np.where(fill_holes(pd_slice.data > 40), 100.0, 0.0), name="mask")
     moving = moved(silhouette, RigidTransform.euler2d(4.0, -3.0, 6.0, pd_slice.center))
-    reg = register(pd_slice, moving)
-    assert "outline" in {f.check for f in reg.flags} and not reg.ok
-    assert reg.measures["structure_moving"] < 0.04 < reg.measures["structure_fixed"]
+    every = register(pd_slice, moving, RegisterParams.model_validate({"check": {"outline_gap": 0}}))
+    assert "outline" in {f.check for f in every.flags} and not every.ok
+    assert every.measures["structure_moving"] < 0.04 < every.measures["structure_fixed"]
+    default = register(pd_slice, moving)
+    drop, gap, c = default.measures.get("consistency", 0.0), default.measures["outline_gap"], RegisterParams().check
+    assert ("outline" in {f.check for f in default.flags}) == (drop > c.outline_drop or gap > c.outline_gap)
     off = register(pd_slice, moving, RegisterParams.model_validate({"check": {"min_structure": 0}}))
     assert "outline" not in {f.check for f in off.flags}

@@ -1,0 +1,128 @@
+"""An attack on the ``outline`` self-check from images it was not tuned on: outline-only moving images (silhouettes,
+the issue's dilated uniform masks) and ordinary pairs, made from ITK example images that the validation corpus
+(``registration_corpus.py``) never draws from, registered as a user does (``topomatch.register(fixed_path,
+moving_path, metric=m)``, defaults, from files), elastix beside it when installed.
+
+Sources: 2D ``BrainMidSagittalSlice.png``, ``FatMRISlice.png``, ``VisibleWomanHeadSlice.png``,
+``VisibleWomanEyeSlice.png``, ``RatLungSlice1.mha``; 3D ``KmeansTest_T1RawSkullStrip.nii.gz`` (a 4-class label
+map: the issue's public reproduction, fixed = the label map, moving = its foreground dilated by 2 voxels, made
+uniform, 2 % noise, +-15 deg / +-15 mm). Moving kinds (each moved by a random rigid transform, +-15 deg and
++-15 pixels or mm about each axis, 2 % noise):
+
+- ``same``: the source itself (the control: a flag there is a false alarm);
+- ``labels``: the source quantised to its three Otsu classes (a label map with an inside);
+- ``silhouette0`` / ``silhouette1`` / ``silhouette2``: the source's filled Otsu foreground, dilated by 0, 1, 2
+  pixels, at one value (outline-only).
+
+Correct = mean TRE over the fixed content <= 1 pixel (2D) or 1 mm (3D), as in the corpus. Counts per kind:
+ok (correct, passed) / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
+
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_outline_attack.py \\
+        --json benchmarks/results/registration_outline_attack.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import registration_corpus as corpus  # noqa: E402  (files, methods and TRE as the corpus computes them)
+
+from topomatch.pipeline.paths import data_root  # noqa: E402
+from topomatch.stages.registration.image import Image, otsu_threshold  # noqa: E402
+from topomatch.stages.registration.io import read_image  # noqa: E402
+from topomatch.stages.registration.misalign import moved  # noqa: E402
+from topomatch.stages.registration.transform import RigidTransform, n_angles  # noqa: E402
+
+SOURCES_2D = ("BrainMidSagittalSlice.png", "FatMRISlice.png", "VisibleWomanHeadSlice.png", "VisibleWomanEyeSlice.png",
+              "RatLungSlice1.mha")
+SOURCES_3D = ("KmeansTest_T1RawSkullStrip.nii.gz",)
+KINDS = ("same", "labels", "silhouette0", "silhouette1", "silhouette2")
+NOISE = 0.02
+
+
+def moving_source(source: Image, kind: str) -> Image:
+    """The unmoved moving image of ``kind`` made from ``source`` (module docstring)."""
+    if kind == "same":
+        return source
+    if kind == "labels":
+        low, high = corpus.multi_otsu(source.data[source.data > source.data.min()])
+        return source.with_data(np.digitize(source.data, [low, high]).astype(np.float64), name=f"{source.name}_labels")
+    mask = corpus._largest_filled(source.data > otsu_threshold(source.data))
+    dilation = int(kind[-1])
+    if dilation:
+        mask = ndimage.binary_dilation(mask, iterations=dilation)
+    return source.with_data(mask.astype(np.float64), name=f"{source.name}_{kind}")
+
+
+def random_truth(rng: np.random.Generator, image: Image) -> RigidTransform:
+    """Angles within +-15 deg about each axis, translations within +-15 units, about the image's centre."""
+    angles = np.radians(rng.uniform(-15, 15, n_angles(image.dim)))
+    return RigidTransform((*angles, *rng.uniform(-15, 15, image.dim)), tuple(image.center))
+
+
+def cases(seeds: int):
+    """(id, fixed, moving, truth) for every source, kind and seed."""
+    folder = data_root() / "images" / "itk_examples_data" if data_root() else None
+    if folder is None or not folder.is_dir():
+        raise SystemExit("set TOPOMATCH_DATA_ROOT to the shared data (images/itk_examples_data)")
+    for name in SOURCES_2D + SOURCES_3D:
+        source = read_image(folder / name)
+        for kind in KINDS:
+            base = moving_source(source, kind)
+            for seed in range(seeds):
+                rng = np.random.default_rng([seed, KINDS.index(kind), len(name)])
+                truth = random_truth(rng, source)
+                moving = moved(base, truth, order=1, noise=NOISE, rng=rng)
+                yield f"{Path(name).name.split('.')[0]}-{kind}-{seed}", source, moving, truth, kind
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=4, help="random transforms per source and kind")
+    ap.add_argument("--metrics", default="jt,mi")
+    ap.add_argument("--json", type=Path)
+    args = ap.parse_args(argv)
+    runners = {f"ours-{m}": (lambda m: lambda *a: corpus.run_ours(m, *a))(m) for m in args.metrics.split(",")}
+    if corpus.elastix_available():
+        runners["elastix"] = corpus.run_elastix
+    rows, counts = [], collections.Counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for cid, fixed, moving, truth, kind in cases(args.seeds):
+            fixed_path, moving_path = Path(tmp) / f"{cid}_fixed.nii.gz", Path(tmp) / f"{cid}_moving.nii.gz"
+            corpus.write_image(fixed, fixed_path)
+            corpus.write_image(moving, moving_path)
+            fixed_read, moving_read = read_image(fixed_path), read_image(moving_path)
+            line = [cid]
+            for method, run in runners.items():
+                result = run(fixed_path, moving_path, fixed_read, moving_read)
+                est = result.transform
+                tre = corpus.mean_tre(est.with_center(fixed_read.center), truth.with_center(fixed_read.center),
+                                      fixed_read) if est is not None else float("inf")
+                right = tre <= 1.0
+                verdict = ("ok" if right else "silent") if result.ok else ("FF" if right else "fw")
+                counts[(fixed.dim, kind, method, verdict)] += 1
+                rows.append({"case": cid, "dim": fixed.dim, "kind": kind, "method": method, "tre": round(tre, 4),
+                             "verdict": verdict, "flags": result.flags, "measures": result.measures})
+                line.append(f"{method} {tre:.2f} {verdict}")
+            print(" | ".join(line), flush=True)
+    summary = {f"{dim}D {kind} {method}": "/".join(str(counts[(dim, kind, method, v)]) for v in ("ok", "FF", "fw",
+                                                                                                  "silent"))
+               for dim in (2, 3) for kind in KINDS for method in runners}
+    print("ok / FF / fw / silent")
+    for key, value in summary.items():
+        print(f"  {key:28s} {value}")
+    if args.json:
+        args.json.write_text(json.dumps({"about": __doc__, "summary": summary, "rows": rows}, indent=1))
+
+
+if __name__ == "__main__":
+    main()
