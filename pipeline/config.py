@@ -27,6 +27,7 @@ import hashlib
 import itertools
 import json
 import math
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -52,12 +53,60 @@ class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
+#: The environment variable that names a dask scheduler (the one Dask's own ``Client()`` reads): used by
+#: ``kind: dask`` when no ``address`` is given.
+SCHEDULER_ENV = "DASK_SCHEDULER_ADDRESS"
+
+#: Seconds a dask run waits for its scheduler and for a worker when ``executor.timeout`` is not given.
+DEFAULT_DASK_TIMEOUT = 60.0
+
+
 class ExecutorConfig(_Strict):
     """Where the items of a run are computed."""
 
     kind: Literal["local", "dask"] = Field("local", description="local process pool or a dask cluster")
-    workers: int | None = Field(None, ge=1, description="worker processes (default: all cores)")
-    address: str | None = Field(None, description="dask scheduler address; none starts a local cluster")
+    workers: int | None = Field(None, ge=1, description="worker processes of the local pool or of a new local dask "
+                                                        "cluster (default: all cores)")
+    address: str | None = Field(None, min_length=1, description=f"dask scheduler to use, e.g. tcp://host:8786 "
+                                f"(default: ${SCHEDULER_ENV}, else a new local dask cluster)")
+    timeout: float | None = Field(None, gt=0, allow_inf_nan=False,
+                                  description=f"dask: seconds to wait for the scheduler to answer and for a worker, "
+                                              f"at the start or after every worker left (default: "
+                                              f"{DEFAULT_DASK_TIMEOUT:g})")
+
+    def scheduler(self) -> tuple[str | None, str]:
+        """The dask scheduler this executor uses and where its address comes from (``executor.address``,
+        or ``$DASK_SCHEDULER_ADDRESS`` when no address is given); ``(None, "")`` for a new local cluster or
+        the local executor."""
+        if self.kind != "dask":
+            return None, ""
+        if self.address:
+            return self.address, "executor.address"
+        env = os.environ.get(SCHEDULER_ENV, "").strip()
+        return (env, f"${SCHEDULER_ENV}") if env else (None, "")
+
+    def check(self) -> None:
+        """Refuse the settings that do not apply to the chosen executor (they would be ignored).
+
+        Raises
+        ------
+        ConfigError
+            ``address`` or ``timeout`` with ``kind: local``; ``workers`` with a scheduler address (the
+            cluster decides its workers), the address from the config or from ``$DASK_SCHEDULER_ADDRESS``.
+        """
+        if self.kind == "local":
+            for name, flag in (("address", "--address"), ("timeout", "--dask-timeout")):
+                if getattr(self, name) is not None:
+                    raise ConfigError(f"executor.{name} ({flag}) applies only to the dask executor, and the executor "
+                                      f"is local; set executor.kind: dask (--executor dask) or leave it out")
+            return
+        address, source = self.scheduler()
+        if address is not None and self.workers is not None:
+            leave = ("unset $" + SCHEDULER_ENV) if source.startswith("$") else "leave out executor.address (--address)"
+            raise ConfigError(f"executor.workers ({self.workers}, --workers) does not apply with the dask scheduler at "
+                              f"{address} (from {source}): that cluster decides its workers; leave out "
+                              f"executor.workers (--set executor.workers=null), or {leave} to start a local cluster "
+                              f"of {self.workers} workers")
 
 
 class PairConfig(_Strict):
@@ -385,6 +434,7 @@ def build_experiment(
                               "inputs: {meshes: [\"{bundled}/meshes/*.off\"]}")
         check_chain(calls, given)
         _check_sweeps(raw, calls)
+        raw.executor.check()
         reports = _resolve_reports(raw)
     except ConfigError as exc:
         raise ConfigError(prefix + str(exc).replace("\n", "\n" + " " * len(prefix))) from None

@@ -50,6 +50,13 @@ class RunError(TopomatchError):
     kind = "run"
 
 
+class ExecutorError(TopomatchError):
+    """The executor could not finish a run: the dask scheduler was lost or unreachable mid-run, or it has no
+    workers. What finished is kept (cached stages, indexed rows): the same command resumes."""
+
+    kind = "executor"
+
+
 class InputWarning(UserWarning):
     """An input was read under an assumption the file does not state (e.g. a NIfTI header without an
     orientation); the CLI prints it as ``topomatch: warning: ...``."""

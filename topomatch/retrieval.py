@@ -22,7 +22,7 @@ import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -45,9 +45,9 @@ MATCH_OPTIONS = ("match.correspondence", "match.dissimilarity", "match.unmatched
 
 
 def method_experiment(method: str, paths: list[Path], *, workers: int | None = 1,
-                      executor: str | None = None) -> Experiment:
+                      executor: str | Mapping[str, Any] | None = None) -> Experiment:
     """The experiment that computes ``method``'s descriptor for each mesh path (``workers`` None: all
-    cores; ``executor`` None: the config default, local processes)."""
+    cores; ``executor``: see :func:`executor_settings`)."""
     m = get_method(method)
     if m.kind == "fusion":
         raise ConfigError(f"{method} is a fusion: its parts {', '.join(m.parts)} have the descriptors")
@@ -55,8 +55,26 @@ def method_experiment(method: str, paths: list[Path], *, workers: int | None = 1
         "name": f"index-{method}",
         "inputs": {"meshes": [str(p) for p in paths] or ["(no input)"]},
         "stages": list(m.chain),
-        "executor": {"workers": workers, **({"kind": executor} if executor else {})},
+        "executor": executor_settings(workers, executor),
     }, resolve_inputs=bool(paths))
+
+
+def executor_settings(workers: int | None, executor: str | Mapping[str, Any] | None) -> dict[str, Any]:
+    """The config's ``executor:`` mapping for ``workers`` and ``executor``: a kind (``"local"``, ``"dask"``), a
+    mapping of executor settings (``{"kind": "dask", "address": "tcp://host:8786"}``), or None (local processes).
+
+    Raises
+    ------
+    ConfigError
+        A setting that is malformed or does not apply to the executor (``address`` with ``kind: local``,
+        ``workers`` with a scheduler address: :meth:`~topomatch.pipeline.config.ExecutorConfig.check`).
+    """
+    from topomatch.pipeline.config import ExecutorConfig
+    from topomatch.pipeline.params import validate_json_strict
+
+    settings = {"workers": workers, **({"kind": executor} if isinstance(executor, str) else dict(executor or {}))}
+    validate_json_strict(ExecutorConfig, settings, "executor").check()
+    return settings
 
 
 def params_of(experiment: Experiment) -> tuple[dict, str]:
@@ -268,9 +286,13 @@ class IndexReport:
 
 
 def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METHOD, labels: str | Path | None = None,
-          workers: int | None = None, executor: str | None = None, retry_failed: bool = False,
+          workers: int | None = None, executor: str | Mapping[str, Any] | None = None, retry_failed: bool = False,
           progress: bool = False) -> IndexReport:
     """Index every mesh file of ``paths`` (files or folders) into the shape index ``db``.
+
+    ``workers``: processes of the local pool or of a new local dask cluster (None: all cores); ``executor``:
+    ``"local"`` (default), ``"dask"``, or the executor settings as a mapping, e.g. ``{"kind": "dask",
+    "address": "tcp://host:8786"}`` (a cluster: docs/cluster.md).
 
     One work unit per mesh runs every part method of ``method`` on it, so the stages the parts
     share (load, clean, decimate, spectrum) are computed once, in memory, and the workers share out
@@ -284,8 +306,12 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
 
     Raises
     ------
+    ConfigError
+        Executor settings that are malformed or do not apply (before anything is read or written).
     InputError
         No mesh file found, a path that does not exist, an unreadable labels file.
+    ExecutorError
+        The dask scheduler was lost or has no workers; the meshes indexed before are kept.
     """
     from tqdm import tqdm
 
@@ -293,6 +319,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     from topomatch.pipeline.cache import hash_file
     from topomatch.stages.retrieval.labels import read_labels
 
+    executor = executor_settings(workers, executor)  # refused before anything is read or written
     files = mesh_files(paths)
     if not files:
         raise InputError(None, f"no mesh files ({', '.join(MESH_SUFFIXES)}, optionally .gz) in "

@@ -152,3 +152,37 @@ def test_a_chain_that_reads_files_needs_inputs(small_config):
     small_config["inputs"] = {"meshes": []}
     with pytest.raises(ConfigError, match=r"inputs: the chain reads input files, and the config lists none"):
         build_experiment(small_config)
+
+
+@pytest.mark.parametrize("executor, message", [
+    ({"kind": "local", "address": "tcp://h:8786"}, r"^executor\.address \(--address\) applies only to the dask executor"),
+    ({"address": "tcp://h:8786"}, r"^executor\.address .*the executor is local"),
+    ({"kind": "local", "timeout": 5}, r"^executor\.timeout \(--dask-timeout\) applies only to the dask executor"),
+    ({"kind": "dask", "address": "tcp://h:8786", "workers": 2},
+     r"^executor\.workers \(2, --workers\) does not apply with the dask scheduler at tcp://h:8786 \(from "
+     r"executor\.address\): that cluster decides its workers"),
+])
+def test_executor_settings_that_do_not_apply_are_refused(small_config, executor, message, monkeypatch):
+    monkeypatch.delenv("DASK_SCHEDULER_ADDRESS", raising=False)
+    small_config["executor"] = executor
+    with pytest.raises(ConfigError, match=message):
+        build_experiment(small_config)
+
+
+def test_the_scheduler_address_comes_from_the_config_then_the_environment(small_config, monkeypatch):
+    from topomatch.pipeline.config import ExecutorConfig
+
+    monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", "tcp://env:8786")
+    assert ExecutorConfig(kind="dask", address="tcp://given:1").scheduler() == ("tcp://given:1", "executor.address")
+    assert ExecutorConfig(kind="dask").scheduler() == ("tcp://env:8786", "$DASK_SCHEDULER_ADDRESS")
+    assert ExecutorConfig(kind="local").scheduler() == (None, "")  # the local executor ignores the environment
+    build_experiment({**small_config, "executor": {"kind": "local", "workers": 2}})
+    # the environment's address is the cluster's: a local cluster size does not apply, and the message says where
+    # the address came from
+    small_config["executor"] = {"kind": "dask", "workers": 2}
+    with pytest.raises(ConfigError, match=r"from \$DASK_SCHEDULER_ADDRESS\).*unset \$DASK_SCHEDULER_ADDRESS to start "
+                                          r"a local cluster of 2 workers"):
+        build_experiment(small_config)
+    monkeypatch.delenv("DASK_SCHEDULER_ADDRESS")
+    assert ExecutorConfig(kind="dask").scheduler() == (None, "")
+    assert build_experiment(small_config).raw.executor.workers == 2

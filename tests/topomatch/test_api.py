@@ -127,15 +127,20 @@ def _subparser(name):
     return sub.choices[name]
 
 
-#: The module that declares each command's options (its ``_models()``).
+#: The module that declares each command's options (its ``_models()``; the executor options of the commands that
+#: fan out work come from the config's executor settings: topomatch.cli.common.add_executor_options).
 OPTION_MODULES = {"skeleton": "topomatch.cli.skeleton", "register": "topomatch.cli.registration",
                   "match": "topomatch.cli.retrieval", "query": "topomatch.cli.retrieval",
-                  "evaluate": "topomatch.cli.retrieval", "index": "topomatch.cli.retrieval"}
+                  "evaluate": "topomatch.cli.retrieval", "index": "topomatch.cli.retrieval",
+                  "run": "topomatch.cli.engine", "validate": "topomatch.cli.engine"}
 
 
 @pytest.mark.parametrize("command", sorted(OPTION_MODULES))
 def test_cli_options_show_the_model_defaults_and_set_nothing_unless_given(command):
-    models = importlib.import_module(OPTION_MODULES[command])._models()
+    from topomatch.pipeline.config import ExecutorConfig
+
+    models = {**getattr(importlib.import_module(OPTION_MODULES[command]), "_models", dict)(),
+              "executor": ExecutorConfig}
     generated = [a for a in _subparser(command)._actions if a.dest.startswith("opt__")]
     assert generated
     for action in generated:

@@ -15,23 +15,8 @@ import uuid
 from pathlib import Path
 
 import pytest
+from processes import tagged_processes
 from tests_paths import BUNDLED_MESHES
-
-
-def _tagged_processes(tag: str) -> list[int]:
-    """Pids of the live processes whose environment holds ``TOPOMATCH_TEST_TAG=tag``."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            env = (entry / "environ").read_bytes()
-            state = (entry / "stat").read_text().split()[2]
-        except OSError:
-            continue
-        if f"TOPOMATCH_TEST_TAG={tag}".encode() in env and state != "Z":
-            found.append(int(entry.name))
-    return found
 
 
 def _rows(db: Path) -> int:
@@ -60,14 +45,14 @@ def test_killed_index_leaves_no_workers_and_resumes(tmp_path):
     while _rows(db) < 2 and time.time() < deadline and proc.poll() is None:
         time.sleep(0.05)
     assert proc.poll() is None, "the index finished before it could be killed"
-    assert len(_tagged_processes(tag)) >= 2  # the command and its workers
+    assert len(tagged_processes(tag)) >= 2  # the command and its workers
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     done = _rows(db)
     deadline = time.time() + 10
-    while _tagged_processes(tag) and time.time() < deadline:
+    while tagged_processes(tag) and time.time() < deadline:
         time.sleep(0.2)
-    assert _tagged_processes(tag) == [], "worker processes outlived the killed command"
+    assert tagged_processes(tag) == [], "worker processes outlived the killed command"
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert f"{8 - done} indexed, 0 failed, {done} unchanged" in out.stdout
@@ -106,9 +91,9 @@ def test_killed_run_leaves_no_workers_is_marked_incomplete_and_resumes(tmp_path)
     proc.wait()
     stored = _cache_entries(cache)
     deadline = time.time() + 10
-    while _tagged_processes(tag) and time.time() < deadline:
+    while tagged_processes(tag) and time.time() < deadline:
         time.sleep(0.2)
-    assert _tagged_processes(tag) == [], "worker processes outlived the killed run"
+    assert tagged_processes(tag) == [], "worker processes outlived the killed run"
     (run_dir,) = [p for p in out.iterdir() if p.name.startswith("killed-")]
     assert (run_dir / "INCOMPLETE").is_file() and not (run_dir / "tables" / "results.csv").exists()
 

@@ -67,6 +67,43 @@ def command(sub, name: str, *, help: str, description: str, handler: Callable[[a
         build(p)
 
 
+def _executor_options() -> tuple:
+    """The executor settings a command that fans out work exposes, as options of its command line."""
+    from topomatch.pipeline.cli_options import Option
+
+    return (Option("executor.kind", flag="--executor"),
+            Option("executor.address"),
+            Option("executor.workers", default_help="all cores"),
+            Option("executor.timeout", flag="--dask-timeout"))
+
+
+def add_executor_options(p: argparse.ArgumentParser) -> None:
+    """``--executor local|dask``, ``--address``, ``--workers``, ``--dask-timeout``: generated from the config's
+    executor settings (:class:`~topomatch.pipeline.config.ExecutorConfig`), the same for every command that
+    fans out work (``run``, ``validate``, ``index``). Given, they take precedence over the config's
+    ``executor:`` and ``--set executor.*``; ``--address`` over ``$DASK_SCHEDULER_ADDRESS``."""
+    from topomatch.pipeline.cli_options import add_options
+    from topomatch.pipeline.config import ExecutorConfig
+
+    group = p.add_argument_group("executor", "where the work runs (docs/cluster.md); settings that do not apply to "
+                                             "the chosen executor are refused")
+    add_options(group, {"executor": ExecutorConfig}, _executor_options())
+
+
+def executor_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The executor settings given on the command line (``{"kind": "dask", "address": ...}``), each validated.
+
+    Raises
+    ------
+    ConfigError
+        A value its setting refuses (``--workers 0``), naming the option.
+    """
+    from topomatch.pipeline.cli_options import given_options
+    from topomatch.pipeline.config import ExecutorConfig
+
+    return given_options(args, {"executor": ExecutorConfig}, _executor_options()).get("executor", {})
+
+
 def path_argument(text: str) -> str:
     """An argparse type for a path option: refuses the empty string (which would silently mean
     'the current folder' or 'no output')."""

@@ -5,7 +5,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from topomatch.cli.common import command, info, path_argument, print_json, verbosity
+from topomatch.cli.common import (
+    add_executor_options,
+    command,
+    executor_options,
+    info,
+    path_argument,
+    print_json,
+    verbosity,
+)
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.paths import DATA_ROOT_ENV
 
@@ -18,6 +26,17 @@ def _add_config_args(p: argparse.ArgumentParser) -> None:
                         "(executor.kind=dask); repeatable")
     p.add_argument("--data-root", type=path_argument, metavar="DIR", help=f"external data root for {{data_root}} paths "
                                                        f"(default: ${DATA_ROOT_ENV})")
+    add_executor_options(p)
+
+
+def _load(args: argparse.Namespace):
+    """The config of ``run`` / ``validate`` with ``--set`` and then the executor options applied."""
+    import json
+
+    from topomatch.experiments import load_config
+
+    executor = [f"executor.{key}={json.dumps(value)}" for key, value in executor_options(args).items()]
+    return load_config(args.config, overrides=args.overrides + executor, data_root_dir=args.data_root)
 
 
 def add_parsers(sub) -> None:
@@ -50,10 +69,9 @@ def _run_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from topomatch.experiments import load_config
     from topomatch.pipeline.runner import run_experiment
 
-    experiment = load_config(args.config, overrides=args.overrides, data_root_dir=args.data_root)
+    experiment = _load(args)
     n = len(experiment.items())
     info(f"{experiment.name}: {len(experiment.inputs)} inputs x {len(experiment.sweep_points())} sweep points "
          f"= {n} items, {len(experiment.calls)} stages")
@@ -88,9 +106,7 @@ def cmd_run(args: argparse.Namespace) -> int:
 
 
 def cmd_validate(args: argparse.Namespace) -> int:
-    from topomatch.experiments import load_config
-
-    experiment = load_config(args.config, overrides=args.overrides, data_root_dir=args.data_root)
+    experiment = _load(args)
     if args.json:
         print_json({"config": str(experiment.source), "ok": True, "name": experiment.name,
                     "n_inputs": len(experiment.inputs), "n_sweep_points": len(experiment.sweep_points()),

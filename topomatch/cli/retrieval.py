@@ -11,20 +11,24 @@ from __future__ import annotations
 import argparse
 import sys
 
-from topomatch.cli.common import command, input_path, path_argument, print_json, verbosity, warn
+from topomatch.cli.common import (
+    add_executor_options,
+    command,
+    executor_options,
+    input_path,
+    path_argument,
+    print_json,
+    verbosity,
+    warn,
+)
 from topomatch.pipeline.errors import RunError
 from topomatch.pipeline.cli_options import Option, add_options, given_options
 
 
 def _models() -> dict:
-    from topomatch.pipeline.config import ExecutorConfig
     from topomatch.stages.retrieval.descriptor import MatchOptions
 
-    return {"match": MatchOptions, "executor": ExecutorConfig}
-
-
-#: The executor options of ``index`` (from the config's executor settings).
-EXECUTOR_OPTIONS = (Option("executor.workers", default_help="all cores"), Option("executor.kind", flag="--executor"))
+    return {"match": MatchOptions}
 
 
 def _match_options() -> list[Option]:
@@ -108,7 +112,7 @@ def _index_arguments(p: argparse.ArgumentParser) -> None:
     _method_arg(p, DEFAULT_METHOD)
     p.add_argument("--labels", type=input_path, help="CSV with columns relative_path (or path) and class (or label), "
                                                      "paths relative to the CSV's folder")
-    add_options(p, _models(), EXECUTOR_OPTIONS)
+    add_executor_options(p)
     p.add_argument("--retry-failed", action="store_true", help="recompute meshes recorded as failed")
     p.add_argument("--no-progress", action="store_true", help="hide the progress bar (also hidden by -q)")
     p.add_argument("--json", action="store_true", help="print one JSON object: counts per part method, failures")
@@ -157,9 +161,9 @@ def cmd_match(args: argparse.Namespace) -> int:
 def cmd_index(args: argparse.Namespace) -> int:
     from topomatch.retrieval import index
 
-    settings = given_options(args, _models(), EXECUTOR_OPTIONS).get("executor", {})
-    report = index(args.paths, args.db, method=args.method, labels=args.labels, workers=settings.get("workers"),
-                   executor=settings.get("kind"), retry_failed=args.retry_failed,
+    settings = executor_options(args)
+    report = index(args.paths, args.db, method=args.method, labels=args.labels, workers=settings.pop("workers", None),
+                   executor=settings or None, retry_failed=args.retry_failed,
                    progress=not args.no_progress and verbosity() >= 0)
     if args.json:
         print_json({"db": str(report.db), "method": report.method, "n_files": report.n_files,
