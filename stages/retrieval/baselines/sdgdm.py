@@ -1,0 +1,157 @@
+"""SD-GDM: the spectrum of the geodesic distance matrix (Smeets, Hermans, Vandermeulen, Suetens).
+
+D. Smeets, J. Hermans, D. Vandermeulen, P. Suetens, "Isometric deformation invariant 3D shape
+recognition", Pattern Recognition 45(7), 2012 (among the strongest training-free entries of
+SHREC'11 non-rigid). The geodesic distance matrix of a surface is unchanged by bendings that keep
+lengths; its eigenvalues are, in addition, unchanged by a reordering of the sampled points, so they
+compare two shapes without a correspondence.
+
+Definition used here
+--------------------
+1. **Samples.** ``n_points`` [128] vertices by farthest-point sampling in the geodesic distance:
+   the first is the vertex geodesically farthest from vertex 0, then each new sample is the vertex
+   farthest from those chosen (near-ties within 1e-9 go to the lowest index, so round-off from a
+   rigid motion or a scaling does not change the choice). Each step needs the distances from the
+   new sample to all vertices, so the sampling yields the matrix's rows for free.
+2. **Geodesics.** libigl's heat method (Crane, Weischedel, Wardetzky 2013;
+   ``igl.heat_geodesics_precompute`` / ``heat_geodesics_solve``, time step ``h^2`` with ``h`` the
+   mean edge length): one sparse factorisation per mesh, then two back-substitutions per source.
+   On a 2,562-vertex icosphere: 21 ms to factorise, 0.7 ms per source, against 107 ms per source
+   for ``igl.exact_geodesic`` (MMP); relative error 1-2 % (tests), smooth and nearly uniform.
+   The heat method gives a geodesic distance that is not exactly symmetric: ``G = (G + G^T) / 2``.
+3. **Spectrum.** The ``k`` [20] largest singular values of ``G`` (the magnitudes of its eigenvalues,
+   ``scipy.linalg.eigvalsh``, sorted decreasing): the paper's descriptor. Singular values, not
+   signed eigenvalues, so that two eigenvalues of nearly equal magnitude and opposite signs cannot
+   swap places between two poses.
+4. **Scale normalisation.** Divided by the largest, which grows like ``n_points`` times the mean
+   geodesic distance; the leading entry (always 1) is dropped, so the descriptor is the ``k - 1``
+   ratios ``sigma_i / sigma_1``, i = 2..k. Invariant to a uniform scale and to ``n_points`` (to
+   first order).
+5. **Distance: L2** of the ratio vectors (the paper compares singular-value vectors by a
+   Euclidean-type distance).
+
+Analytic checks (tested): on a flat grid the geodesic distance is the Euclidean one; on a sphere the
+great-circle distance ``R arccos(<x, y> / R^2)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from pydantic import Field
+
+from topomatch.pipeline.contract import Params, StageError, stage
+from topomatch.stages.mesh.mesh import Mesh
+from topomatch.stages.retrieval.baselines.sampling import checked_areas
+from topomatch.stages.retrieval.baselines.vectors import pairwise
+from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
+
+
+class SDGDMParams(Params):
+    """Parameters of SD-GDM (:func:`descriptor`)."""
+
+    n_points: int = Field(128, ge=4, le=4096, description="farthest-point samples (rows of the geodesic distance "
+                                                          "matrix)")
+    k: int = Field(20, ge=2, le=4096, description="largest singular values kept (the descriptor has k - 1 "
+                                                  "entries: the leading one divides the others)")
+
+
+def geodesic_distance_matrix(mesh: Mesh, n_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Farthest-point samples and their symmetrised heat-method geodesic distance matrix.
+
+    Parameters
+    ----------
+    mesh : Mesh
+        One connected triangle mesh (``V`` (n, 3), ``F`` (m, 3)), no degenerate triangles.
+    n_points : int
+        Number of samples (at most the vertex count).
+
+    Returns
+    -------
+    samples : (p,) int64
+        Vertex indices, p = min(n_points, n).
+    G : (p, p) float64
+        Symmetric, zero diagonal.
+
+    Raises
+    ------
+    InputError
+        Empty mesh, bad indices, non-finite coordinates, zero area.
+    StageError
+        The geodesic solve did not reach every vertex (several components) or returned non-finite values.
+    """
+    import igl
+
+    checked_areas(mesh)
+    V = np.ascontiguousarray(mesh.V, dtype=np.float64)
+    F = np.ascontiguousarray(mesh.F, dtype=np.int64)
+    n = V.shape[0]
+    E = igl.edges(F)
+    h = float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean())
+    data = igl.HeatGeodesicsData()
+    igl.heat_geodesics_precompute(V, F, h * h, data)
+
+    def solve(source: int) -> np.ndarray:
+        d = igl.heat_geodesics_solve(data, np.array([source], dtype=np.int64))
+        if not np.isfinite(d).all():
+            raise StageError(f"{mesh.name}: the heat-method geodesic distance is not finite (several components "
+                             "or a degenerate mesh; run clean with components: largest)")
+        return np.maximum(d, 0.0)
+
+    def farthest(dist: np.ndarray) -> int:
+        return int(np.flatnonzero(dist >= dist.max() * (1.0 - 1e-9))[0])
+
+    count = min(n_points, n)
+    rows = np.empty((count, n))
+    source = farthest(solve(0))
+    nearest = np.full(n, np.inf)
+    samples = np.empty(count, dtype=np.int64)
+    for i in range(count):
+        samples[i] = source
+        rows[i] = solve(source)
+        np.minimum(nearest, rows[i], out=nearest)
+        source = farthest(nearest)
+    G = rows[:, samples]
+    G = 0.5 * (G + G.T)
+    np.fill_diagonal(G, 0.0)
+    return samples, G
+
+
+def spectrum(G: np.ndarray, k: int) -> np.ndarray:
+    """The ``k`` largest singular values of the symmetric ``G`` (p, p), decreasing, divided by the largest;
+    the leading 1 dropped: (k - 1,) float64 (zero-padded when ``p < k``)."""
+    from scipy.linalg import eigvalsh
+
+    s = np.sort(np.abs(eigvalsh(G)))[::-1]
+    out = np.zeros(k)
+    out[:min(k, s.shape[0])] = s[:k]
+    if not out[0] > 0:
+        return np.zeros(k - 1)
+    return out[1:] / out[0]
+
+
+def descriptor(mesh: Mesh, params: SDGDMParams | None = None) -> np.ndarray:
+    """SD-GDM of ``mesh``: (k - 1,) float64, the singular values 2..k of its geodesic distance matrix over the
+    largest (module docstring). Defaults: 128 farthest-point samples, k = 20."""
+    params = SDGDMParams() if params is None else params
+    _, G = geodesic_distance_matrix(mesh, params.n_points)
+    return spectrum(G, params.k)
+
+
+def distance(a: np.ndarray, b: np.ndarray) -> float:
+    """L2 distance of two SD-GDM vectors of the same length."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"SD-GDM descriptors must be 1-D of equal length, got {a.shape} and {b.shape}")
+    return float(np.linalg.norm(a - b))
+
+
+def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
+    """All pairwise L2 distances: ``X`` (n, k - 1), ``Y`` (m, k - 1) (default ``X``) -> (n, m) float64."""
+    return pairwise(X, Y, metric="euclidean")
+
+
+@stage("sdgdm", params=SDGDMParams, version=1, consumes=("mesh",), produces=("descriptor",))
+def sdgdm_stage(mesh: Mesh, *, params: SDGDMParams) -> DescriptorResult:
+    """SD-GDM (Smeets et al. 2012): normalised leading singular values of the geodesic distance matrix."""
+    return DescriptorResult(Descriptor("vector", descriptor(mesh, params)))
