@@ -62,7 +62,7 @@ DISTANCES = ("l2", "log")
 def matrix(S: np.ndarray, k: int, dist: str) -> np.ndarray:
     X = S[:, 1:k] / S[:, :1]
     if dist == "log":
-        X = np.log(np.maximum(X, 1e-6))
+        X = np.log(np.maximum(X, sdgdm.LOG_FLOOR))
     return pairwise(X, metric="euclidean")
 
 

@@ -53,6 +53,8 @@ class SDGDMParams(Params):
                                                           "matrix)")
     k: int = Field(20, ge=2, le=4096, description="largest singular values kept (the descriptor has k - 1 "
                                                   "entries: the leading one divides the others)")
+    log: bool = Field(True, description="keep the logarithms of the ratios sigma_i / sigma_1 (their L2 distance "
+                                        "compares every ratio relatively), or the ratios themselves")
 
 
 def geodesic_distance_matrix(mesh: Mesh, n_points: int) -> tuple[np.ndarray, np.ndarray]:
@@ -116,17 +118,21 @@ def geodesic_distance_matrix(mesh: Mesh, n_points: int) -> tuple[np.ndarray, np.
     return samples, G
 
 
-def spectrum(G: np.ndarray, k: int) -> np.ndarray:
-    """The ``k`` largest singular values of the symmetric ``G`` (p, p), decreasing, divided by the largest;
-    the leading 1 dropped: (k - 1,) float64 (zero-padded when ``p < k``)."""
+#: Smallest ratio whose logarithm is kept (a zero singular value, or the padding past ``p``, maps to log 1e-6).
+LOG_FLOOR = 1e-6
+
+
+def spectrum(G: np.ndarray, k: int, log: bool = False) -> np.ndarray:
+    """The ``k`` largest singular values of the symmetric ``G`` (p, p), decreasing, divided by the largest, the
+    leading 1 dropped: (k - 1,) float64 (zero-padded when ``p < k``); with ``log``, their logarithms (floored at
+    ``log 1e-6``)."""
     from scipy.linalg import eigvalsh
 
     s = np.sort(np.abs(eigvalsh(G)))[::-1]
     out = np.zeros(k)
     out[:min(k, s.shape[0])] = s[:k]
-    if not out[0] > 0:
-        return np.zeros(k - 1)
-    return out[1:] / out[0]
+    ratios = out[1:] / out[0] if out[0] > 0 else np.zeros(k - 1)
+    return np.log(np.maximum(ratios, LOG_FLOOR)) if log else ratios
 
 
 def descriptor(mesh: Mesh, params: SDGDMParams | None = None) -> np.ndarray:
@@ -134,7 +140,7 @@ def descriptor(mesh: Mesh, params: SDGDMParams | None = None) -> np.ndarray:
     largest (module docstring). Defaults: 128 farthest-point samples, k = 20."""
     params = SDGDMParams() if params is None else params
     _, G = geodesic_distance_matrix(mesh, params.n_points)
-    return spectrum(G, params.k)
+    return spectrum(G, params.k, params.log)
 
 
 def distance(a: np.ndarray, b: np.ndarray) -> float:

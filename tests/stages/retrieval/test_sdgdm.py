@@ -70,6 +70,7 @@ def test_spectrum_of_a_known_matrix():
     tri = np.ones((3, 3)) - np.eye(3)
     assert sdgdm.spectrum(tri, 3) == pytest.approx([0.5, 0.5])
     assert sdgdm.spectrum(tri, 5) == pytest.approx([0.5, 0.5, 0.0, 0.0])  # zero-padded past p
+    assert sdgdm.spectrum(tri, 4, log=True) == pytest.approx([np.log(0.5), np.log(0.5), np.log(sdgdm.LOG_FLOOR)])
 
 
 def test_invariance_to_rigid_motion_and_scale(human):
