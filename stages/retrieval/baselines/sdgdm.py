@@ -79,32 +79,33 @@ def geodesic_distance_matrix(mesh: Mesh, n_points: int) -> tuple[np.ndarray, np.
     InputError
         Empty mesh, bad indices, non-finite coordinates, zero area.
     StageError
-        The geodesic solve did not reach every vertex (several components) or returned non-finite values.
+        Several connected components (a vertex unreachable from another).
+
+    The heat method is used where it works; where its factorisation fails or its solve is not finite (a badly
+    shaped mesh), the distances along the edge graph (Dijkstra) are used instead.
     """
-    import igl
+    from scipy.sparse.csgraph import connected_components, dijkstra
 
     checked_areas(mesh)
     V = np.ascontiguousarray(mesh.V, dtype=np.float64)
     F = np.ascontiguousarray(mesh.F, dtype=np.int64)
     n = V.shape[0]
-    E = igl.edges(F)
-    h = float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean())
-    data = igl.HeatGeodesicsData()
-    igl.heat_geodesics_precompute(V, F, h * h, data)
-
-    def solve(source: int) -> np.ndarray:
-        d = igl.heat_geodesics_solve(data, np.array([source], dtype=np.int64))
-        if not np.isfinite(d).all():
-            raise StageError(f"{mesh.name}: the heat-method geodesic distance is not finite (several components "
-                             "or a degenerate mesh; run clean with components: largest)")
-        return np.maximum(d, 0.0)
+    graph = _edge_graph(V, F)
+    if connected_components(graph, directed=False)[0] > 1:
+        raise StageError(f"{mesh.name}: the surface has several connected components (SD-GDM needs one; "
+                         "run clean with components: largest)")
+    solve = _heat_solver(V, F)
+    first = solve(0) if solve is not None else None
+    if first is None or not np.isfinite(first).all():  # the heat method broke down numerically: the edge graph
+        solve = lambda source: dijkstra(graph, directed=True, indices=source)  # noqa: E731
+        first = solve(0)
 
     def farthest(dist: np.ndarray) -> int:
         return int(np.flatnonzero(dist >= dist.max() * (1.0 - 1e-9))[0])
 
     count = min(n_points, n)
     rows = np.empty((count, n))
-    source = farthest(solve(0))
+    source = farthest(first)
     nearest = np.full(n, np.inf)
     samples = np.empty(count, dtype=np.int64)
     for i in range(count):
@@ -116,6 +117,35 @@ def geodesic_distance_matrix(mesh: Mesh, n_points: int) -> tuple[np.ndarray, np.
     G = 0.5 * (G + G.T)
     np.fill_diagonal(G, 0.0)
     return samples, G
+
+
+def _heat_solver(V: np.ndarray, F: np.ndarray):
+    """``source -> (n,) distances`` by libigl's heat method (time step h^2, h the mean edge length), or None when
+    its factorisation fails (a Laplacian that is not positive definite on a badly shaped mesh)."""
+    import igl
+
+    E = igl.edges(F)
+    h = float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean())
+    data = igl.HeatGeodesicsData()
+    try:
+        igl.heat_geodesics_precompute(V, F, h * h, data)
+    except RuntimeError:
+        return None
+    return lambda source: np.maximum(igl.heat_geodesics_solve(data, np.array([source], dtype=np.int64)), 0.0)
+
+
+def _edge_graph(V: np.ndarray, F: np.ndarray):
+    """The symmetric (n, n) sparse graph of the mesh edges weighted by their lengths, for Dijkstra: the heat
+    method's fallback (a few per cent above the geodesic on a fine mesh; at most sqrt 2 on a grid of right
+    triangles)."""
+    import igl
+    import scipy.sparse as sp
+
+    n = V.shape[0]
+    E = igl.edges(F)
+    w = np.maximum(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1), 1e-300)
+    graph = sp.coo_matrix((w, (E[:, 0], E[:, 1])), shape=(n, n)).tocsr()
+    return graph + graph.T
 
 
 #: Smallest ratio whose logarithm is kept (a zero singular value, or the padding past ``p``, maps to log 1e-6).

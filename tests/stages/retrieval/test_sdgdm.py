@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from topomatch.pipeline.errors import InputError
+from topomatch.pipeline.errors import InputError, StageError
 from topomatch.stages.mesh.mesh import Mesh
 from topomatch.stages.retrieval.baselines import sdgdm
 from topomatch.stages.retrieval.catalogue import METHODS
@@ -105,9 +105,23 @@ def test_distance_matrix_matches_distance():
         sdgdm.distance(X[0], X[1, :3])
 
 
-def test_bad_meshes_are_rejected():
+def test_edge_graph_fallback_when_the_heat_method_fails(monkeypatch):
+    # a mesh whose heat-method factorisation fails gets Dijkstra distances along its edges: above the geodesic,
+    # by at most sqrt 2 on this grid of right triangles (across the diagonals), exact along the axes
+    mesh = strip()
+    monkeypatch.setattr(sdgdm, "_heat_solver", lambda V, F: None)
+    samples, G = sdgdm.geodesic_distance_matrix(mesh, 40)
+    E = np.linalg.norm(mesh.V[samples][:, None] - mesh.V[samples][None], axis=2)
+    assert np.all(G >= E - 1e-9) and np.all(G <= np.sqrt(2) * E + 1e-9)
+
+
+def test_bad_meshes_are_rejected(sphere):
     with pytest.raises(InputError):
         sdgdm.descriptor(Mesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64), name="empty"))
+    from shapes import disjoint_union
+
+    with pytest.raises(StageError, match="components"):
+        sdgdm.descriptor(disjoint_union(sphere, sphere))
 
 
 def test_catalogue_record_is_a_vector_method_outside_the_default_fusion():
