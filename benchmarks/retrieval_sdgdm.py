@@ -28,18 +28,18 @@ import numpy as np
 
 from topomatch.pipeline.item import run_stages
 from topomatch.stages.retrieval.baselines import sdgdm
-from topomatch.stages.retrieval.catalogue import INTRINSIC_MESH_CHAIN
+from topomatch.stages.retrieval.catalogue import INTRINSIC_MESH_CHAIN, SDGDM_MESH_CHAIN
 from topomatch.stages.retrieval.labels import read_labels
 from topomatch.stages.retrieval.metrics import retrieval_metrics
 from topomatch.stages.retrieval.baselines.vectors import pairwise
 
 
-def collection_spectra(folder: Path, points: int, cache: str) -> tuple[list[str], np.ndarray, dict, list[float]]:
+def collection_spectra(folder: Path, points: int, cache: str, chain) -> tuple[list[str], np.ndarray, dict, list[float]]:
     """Labels, singular values (n, points) of the leading-sample matrices for each sample count, seconds per mesh."""
     labels = read_labels(folder / "labels.csv")
     names, spectra, seconds = [], {}, []
     for path, label in sorted(labels.items()):
-        r = run_stages(INTRINSIC_MESH_CHAIN, paths={"path": path}, cache_root=cache)
+        r = run_stages(chain, paths={"path": path}, cache_root=cache)
         if not r.ok:
             raise SystemExit(f"{path}: {r.error}")
         mesh = list(r.results.values())[-1].mesh
@@ -54,7 +54,7 @@ def collection_spectra(folder: Path, points: int, cache: str) -> tuple[list[str]
     return names, {p: np.array(v) for p, v in spectra.items()}, seconds
 
 
-POINTS = (64, 128, 256)
+POINTS = [64, 128, 256]
 KS = (5, 10, 20, 40)
 DISTANCES = ("l2", "log")
 
@@ -73,27 +73,35 @@ def scores(D: np.ndarray, labels) -> tuple[float, float]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--watertight", type=Path, required=True)
+    ap.add_argument("--watertight", type=Path)
     ap.add_argument("--tune", type=Path, nargs="*", default=[])
     ap.add_argument("--report", type=Path, nargs="*", default=[])
+    ap.add_argument("--only-spectra", action="store_true", help="compute and save the spectra, no table")
     ap.add_argument("--cache", default="/tmp/sdgdm_cache")
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--mesh", choices=("full", "decimated"), default="full",
+                    help="the method's mesh (cleaned, holes capped), or the intrinsic parts' 6,000-face copy")
+    ap.add_argument("--points", type=int, nargs="*", default=list(POINTS), help="sample counts of the grid")
     args = ap.parse_args()
+    POINTS[:] = args.points
     points = max(POINTS)
+    chain = SDGDM_MESH_CHAIN if args.mesh == "full" else INTRINSIC_MESH_CHAIN
     data = {}
-    for folder in [args.watertight, *args.tune, *args.report]:
+    for folder in [f for f in (args.watertight, *args.tune, *args.report) if f is not None]:
         t = time.perf_counter()
-        saved = Path(args.cache) / f"sdgdm_spectra_{folder.name}_{points}.npz"  # the spectra, for re-runs
+        saved = Path(args.cache) / f"sdgdm_spectra_{folder.name}_{args.mesh}_{points}.npz"  # the spectra, for re-runs
         if saved.exists():
             z = np.load(saved)
             data[folder.name] = (list(z["labels"]), {p: z[f"s{p}"] for p in POINTS}, list(z["seconds"]))
         else:
-            data[folder.name] = collection_spectra(folder, points, args.cache)
+            data[folder.name] = collection_spectra(folder, points, args.cache, chain)
             saved.parent.mkdir(parents=True, exist_ok=True)
             np.savez(saved, labels=np.array(data[folder.name][0]), seconds=np.array(data[folder.name][2]),
                      **{f"s{p}": S for p, S in data[folder.name][1].items()})
         print(f"{folder.name}: {len(data[folder.name][0])} meshes, {time.perf_counter() - t:.0f} s, geodesic matrix of "
               f"{points} samples: median {np.median(data[folder.name][2]):.3f} s per mesh", flush=True)
+    if args.only_spectra:
+        return
     wt_labels, wt_spectra, _ = data[args.watertight.name]
     classes = sorted(set(wt_labels))
     half_a = np.isin(wt_labels, classes[0::2])
@@ -125,7 +133,7 @@ def main() -> None:
     if args.json:
         costs = {n: float(np.median(v[2])) for n, v in data.items()}
         args.json.write_text(json.dumps({"rows": rows, "chosen": {k: chosen[k] for k in ("points", "k", "distance")},
-                                         "median_seconds_per_mesh_geodesics_256": costs}, indent=1))
+                                         "mesh": args.mesh, "median_seconds_per_mesh_geodesics_of_max_points": costs}, indent=1))
 
 
 if __name__ == "__main__":
