@@ -6,10 +6,11 @@ Usage::
         --watertight ../shared/data/meshes/shrec07_watertight \\
         --tune /tmp/stress/{strong_tune,similar_tune,hard_tune2,twins_tune,hires_tune} \\
         --report /tmp/stress/{similar_report,fresh2_report_open,twins_report,hires_report} \\
-        --cache /tmp/sdgdm_cache --json benchmarks/results/retrieval_sdgdm.json
+        --points 64 128 --cache /tmp/sdgdm_cache --json benchmarks/results/retrieval_sdgdm.json
 
-Each folder holds meshes and a ``labels.csv``. Every mesh goes through the ``sdgdm`` method's prefix (the
-cleaned, decimated, capped 6,000-face copy; cached by the pipeline under ``--cache``), then its geodesic
+Each folder holds meshes and a ``labels.csv``. Every mesh goes through the ``sdgdm`` method's prefix (``--mesh
+full``: cleaned, holes capped; ``decimated``: the intrinsic parts' 6,000-face copy, the first version; cached by the
+pipeline under ``--cache``, the spectra too), then its geodesic
 distance matrix of ``max(--points)`` farthest-point samples is computed once; the smaller sample counts are its
 leading rows and columns (farthest-point sampling is incremental). The variants (samples, k, distance on the
 ratios or on their logarithms) are then pure array work. The rule, fixed before any number was read: on the tune
