@@ -14,6 +14,8 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
 - ``agd``: intrinsic skeleton (average geodesic distance) with heat-kernel endpoint signatures;
 - ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum (read from
   the shared spectrum; ``shapedna-full``: its own eigen-solve on the full mesh, kept for comparison);
+- ``sdgdm``: the spectrum of the geodesic distance matrix (Smeets et al. 2012), on the cleaned, capped full mesh
+  (not a fusion part);
 - ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
 - ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (a part dropped when its agreement
   with the others is below 0.5 of the best part's, each kept part scaled by its median, a pair's two
@@ -36,7 +38,7 @@ import numpy as np
 from topomatch.pipeline.contract import ConfigError
 from topomatch.stages.reeb.recipe import skeleton_chain
 from topomatch.stages.retrieval import hks
-from topomatch.stages.retrieval.baselines import d2, shapedna, spherical_harmonics
+from topomatch.stages.retrieval.baselines import d2, sdgdm, shapedna, spherical_harmonics
 from topomatch.stages.retrieval.descriptor import MatchOptions
 from topomatch.stages.retrieval.fusion import Fusion
 
@@ -58,6 +60,13 @@ SPECTRAL_CHAIN: tuple[Any, ...] = CLEAN_CHAIN + (
     "fill_holes",
     {"spectrum": {"k": 40}},
 )
+
+#: The same decimated, capped copy without the spectrum (geodesics, no Laplacian eigenpairs).
+INTRINSIC_MESH_CHAIN: tuple[Any, ...] = SPECTRAL_CHAIN[:-1]
+
+#: SD-GDM's mesh: cleaned and capped, **not** decimated -- the 6,000-face copy (fast-simplification) bridges parts
+#: that nearly touch, and a geodesic distance matrix is destroyed by such shortcuts (docs/retrieval.md, "SD-GDM, alone").
+SDGDM_MESH_CHAIN: tuple[Any, ...] = CLEAN_CHAIN + ("fill_holes",)
 
 
 @dataclass(frozen=True)
@@ -126,6 +135,9 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("sh", "rotation-invariant spherical harmonics (Kazhdan 2003), 2^15 surface points", "vector",
            CLEAN_CHAIN + ({"spherical_harmonics": {"n_points": SH_POINTS}},),
            distance=spherical_harmonics.distance_matrix),
+    Method("sdgdm", "SD-GDM, the logarithms of the 40 leading singular values of the geodesic distance matrix of 64 "
+           "farthest-point samples over the largest (Smeets 2012), on the cleaned, capped full mesh", "vector",
+           SDGDM_MESH_CHAIN + ("sdgdm",), distance=sdgdm.distance_matrix),
     Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: a part whose nearest neighbours agree "
            "with the others' less than 0.5 of the best part's is dropped, each kept part scaled by its median, a "
            "pair's two smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size, "

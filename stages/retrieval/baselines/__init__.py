@@ -11,10 +11,13 @@ module                        descriptor                               shape    
 :mod:`.spherical_harmonics`   rotation-invariant SH (Kazhdan 2003)     (radii, L+1)        L2
                                                                        = (32, 17)
 :mod:`.shapedna`              ShapeDNA (Reuter 2006), lambda_i A / i   (k,) = (30,)        L2
+:mod:`.sdgdm`                 SD-GDM (Smeets 2012), log of the         (k - 1,) = (39,)    L2
+                              geodesic distance matrix's singular
+                              values over the largest
 ============================  =======================================  ==================  ========
 
 :mod:`.sampling` holds the shared surface sampler. Each module also defines its pipeline stage
-(``d2``, ``spherical_harmonics``, ``shapedna``); the retrieval methods that use them are records of
+(``d2``, ``spherical_harmonics``, ``shapedna``, ``sdgdm``); the retrieval methods that use them are records of
 :mod:`topomatch.stages.retrieval.catalogue`.
 """
 

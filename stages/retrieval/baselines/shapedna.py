@@ -52,7 +52,7 @@ from pydantic import Field
 
 from topomatch.pipeline.contract import Params, StageError, stage
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.retrieval.baselines.vectors import pairwise
+from topomatch.stages.retrieval.baselines.vectors import l2, pairwise
 from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
 
 Normalization = Literal["area", "area_index", "none"]
@@ -182,11 +182,7 @@ def descriptor(mesh: Mesh, params: ShapeDNAParams | None = None) -> np.ndarray:
 
 def distance(a: np.ndarray, b: np.ndarray) -> float:
     """L2 (Euclidean) distance of two ShapeDNA sequences of the same length."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    if a.shape != b.shape or a.ndim != 1:
-        raise ValueError(f"ShapeDNA descriptors must be 1-D of equal length, got {a.shape} and {b.shape}")
-    return float(np.linalg.norm(a - b))
+    return l2(a, b, "ShapeDNA")
 
 
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:

@@ -23,3 +23,12 @@ def pairwise(X, Y=None, *, metric: str) -> np.ndarray:
     if X.shape[1] != Y.shape[1]:
         raise ValueError(f"descriptor sizes differ: {X.shape} vs {Y.shape}")
     return cdist(X, Y, metric=metric)
+
+
+def l2(a, b, what: str) -> float:
+    """L2 (Euclidean) distance of two 1-D descriptors of the same length; ``what`` names them in the error."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if a.shape != b.shape or a.ndim != 1:
+        raise ValueError(f"{what} descriptors must be 1-D of equal length, got {a.shape} and {b.shape}")
+    return float(np.linalg.norm(a - b))
