@@ -67,7 +67,7 @@ MESH_CHAIN = [
     "endpoint_descriptor", "libigl_reference", "fill_holes", {"spectrum": {"k": 20}}, "hks",
     {"shapedna_of_spectrum": {"k": 10}},
     "endpoint_hks_descriptor",
-    "d2", "spherical_harmonics", {"shapedna": {"k": 10}},
+    "d2", "spherical_harmonics", {"shapedna": {"k": 10}}, "sdgdm",
 ]
 IMAGE_CHAIN = [
     "load_pair", {"misalign_pair": {"theta": [4.0, 3.0, -2.0]}},
