@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Annotated, Any, Mapping, Sequence
 
 from topomatch.pipeline.errors import ConfigError
+from topomatch.pipeline.mappings import set_path
 
 if typing.TYPE_CHECKING:  # pydantic is imported when options are built: `topomatch --help` does not pay for it
     from pydantic import BaseModel
@@ -123,9 +124,5 @@ def given_options(args: argparse.Namespace, models: Mapping[str, type[BaseModel]
         except ValidationError as exc:
             err = exc.errors()[0]
             raise ConfigError(f"{spec.name}: {err['msg'].removeprefix('Value error, ')}, got {value!r}") from None
-        head, *rest = spec.path.split(".")
-        target = out.setdefault(head, {})
-        for part in rest[:-1]:
-            target = target.setdefault(part, {})
-        target[rest[-1]] = value
+        set_path(out, spec.path, value, spec.name)
     return out

@@ -34,6 +34,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 from topomatch.pipeline.contract import StageSpec
+from topomatch.pipeline.mappings import deep_merge, set_path
 from topomatch.pipeline.errors import ConfigError, InputError
 from topomatch.pipeline.params import Params, validate_json_strict
 from topomatch.pipeline.paths import display_path, resolve_input
@@ -370,7 +371,7 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
         i = positions[0]
         entry = entries[i]
         params = copy.deepcopy(dict(entry[parts[0]] or {})) if isinstance(entry, dict) else {}
-        _set_path(params, parts[1:], value, f"--set {key}")
+        set_path(params, parts[1:], value, f"--set {key}")
         entries[i] = {parts[0]: params}
     return data
 
@@ -384,15 +385,6 @@ def _section(data: dict[str, Any], name: str, kind: type, item: str) -> Any:
         raise ConfigError(f"--set {item!r}: the config's {name!r} is a {type(section).__name__}, "
                           f"not a {'mapping' if kind is dict else 'list'}")
     return section
-
-
-def _set_path(target: dict[str, Any], path: list[str], value: Any, where: str) -> None:
-    """``target[path[0]][path[1]]... = value``, creating mappings on the way."""
-    for part in path[:-1]:
-        target = target.setdefault(part, {})
-        if not isinstance(target, dict):
-            raise ConfigError(f"{where}: {part!r} is not a mapping")
-    target[path[-1]] = value
 
 
 def _entry_name(entry: Any) -> str | None:
@@ -573,17 +565,8 @@ def chain_with(chain: list[Any] | tuple[Any, ...], overrides: dict[str, dict[str
         i = positions[0]
         entry = out[i]
         params = copy.deepcopy(dict(entry[name] or {})) if isinstance(entry, dict) else {}
-        out[i] = {name: _merge(params, values)}
+        out[i] = {name: deep_merge(params, values)}
     return out
-
-
-def _merge(base: dict[str, Any], values: dict[str, Any]) -> dict[str, Any]:
-    for key, value in values.items():
-        if isinstance(value, dict) and isinstance(base.get(key), dict):
-            base[key] = _merge(dict(base[key]), value)
-        else:
-            base[key] = value
-    return base
 
 
 def _sweep_target(key: str, calls: tuple[StageCall, ...]) -> tuple[int, list[str]]:
@@ -624,7 +607,7 @@ def _with_overrides(calls: tuple[StageCall, ...], point: dict[str, Any]) -> list
         pos, path = _sweep_target(key, calls)
         call = out[pos]
         values = call.params.model_dump(mode="json")
-        _set_path(values, path, value, f"sweep.{key}")
+        set_path(values, path, value, f"sweep.{key}")
         out[pos] = StageCall(call.index, call.label, call.spec, call.spec.params.parse(values, f"sweep.{call.spec.name}"))
     return out
 

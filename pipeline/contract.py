@@ -19,12 +19,13 @@ from typing import Any, Callable
 
 from topomatch.pipeline.errors import ConfigError, InputError, InputWarning, StageError, TopomatchError
 from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text, check_readable_file, limit_from_env
+from topomatch.pipeline.mappings import deep_merge
 from topomatch.pipeline.params import Params
 
 __all__ = [
     "ConfigError", "InputError", "InputWarning", "StageError", "TopomatchError", "Params", "StageResult", "StageSpec", "stage",
     "ReportOutput", "ReportSpec", "report", "gallery_layout", "axis_label", "atomic_write_bytes", "atomic_write_text",
-    "check_readable_file", "limit_from_env",
+    "check_readable_file", "limit_from_env", "deep_merge",
 ]
 
 

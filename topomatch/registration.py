@@ -22,6 +22,7 @@ import numpy as np
 
 from topomatch.pipeline.cli_options import Option
 from topomatch.pipeline.config import chain_with
+from topomatch.pipeline.mappings import set_path
 from topomatch.pipeline.errors import InputError, StageError
 from topomatch.pipeline.files import atomic_write_bytes
 from topomatch.pipeline.item import run_stages
@@ -156,11 +157,7 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
     overrides: dict[str, dict[str, Any]] = {}
     for keyword, value in given.items():
         if value is not None:
-            stage_name, *path = REGISTER_OPTIONS[keyword].path.split(".")
-            target = overrides.setdefault(stage_name, {})
-            for part in path[:-1]:
-                target = target.setdefault(part, {})
-            target[path[-1]] = value
+            set_path(overrides, REGISTER_OPTIONS[keyword].path, value, keyword)
     return register_with(fixed, moving, overrides)
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from topomatch.pipeline.config import chain_with
+from topomatch.pipeline.mappings import set_path
 from topomatch.pipeline.errors import ConfigError, StageError
 from topomatch.pipeline.files import atomic_write_bytes
 from topomatch.pipeline.item import ItemResult, run_stages
@@ -108,8 +109,7 @@ def skeleton(mesh: Mesh | str | Path, *, function: str | None = None, levels: in
     overrides: dict[str, dict[str, Any]] = {}
     for path, value in given.items():
         if value is not None:
-            stage_name, param = path.split(".")
-            overrides.setdefault(stage_name, {})[param] = value
+            set_path(overrides, path, value)
     return skeleton_with(mesh, overrides)
 
 

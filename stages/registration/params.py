@@ -14,7 +14,7 @@ from typing import Any, Literal
 
 from pydantic import Field, model_validator
 
-from topomatch.pipeline.contract import Params
+from topomatch.pipeline.contract import Params, deep_merge
 
 
 class _Named(Params):
@@ -240,13 +240,6 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
 }
 
 
-def _merge(base: dict, top: dict) -> dict:
-    out = dict(base)
-    for key, value in top.items():
-        out[key] = _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
-    return out
-
-
 def for_dimension(params: RegisterParams, dim: int) -> RegisterParams:
     """``params`` with :data:`DIMENSION_DEFAULTS` of ``dim`` for every field the caller did not set."""
     if dim not in DIMENSION_DEFAULTS:
@@ -254,4 +247,4 @@ def for_dimension(params: RegisterParams, dim: int) -> RegisterParams:
     given = params.model_dump(exclude_unset=True)
     if not given.get("schedule"):
         given.pop("schedule", None)
-    return RegisterParams.model_validate(_merge(DIMENSION_DEFAULTS[dim], given))
+    return RegisterParams.model_validate(deep_merge(DIMENSION_DEFAULTS[dim], given))
