@@ -351,12 +351,7 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
             _section(data, "sweep", dict, item)[".".join(parts[1:])] = value
             continue
         if parts[0] in RawConfig.model_fields:
-            target = data
-            for part in parts[:-1]:
-                target = target.setdefault(part, {})
-                if not isinstance(target, dict):
-                    raise ConfigError(f"--set {key}: {part!r} is not a mapping")
-            target[parts[-1]] = value
+            set_path(data, parts, value, f"--set {key}")
             continue
         if len(parts) < 2:
             raise ConfigError(f"--set {key}: expected a config key or stage.param")
