@@ -23,7 +23,7 @@ from topomatch.stages.registration.interpolation import resample
 from topomatch.stages.registration.transform import RigidTransform
 
 CLOSING = 2.0
-"""The content is closed by this many pixels (of the analysed copy) before its holes are filled."""
+"""The content is closed by this many pixels (of the image :func:`object_mask` is given) before its holes are filled."""
 BAND = 2.0
 """Half-width (pixels) of the outline band."""
 ERODE = 3.0
