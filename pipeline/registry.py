@@ -1,76 +1,98 @@
-"""The registry: the YAML name of a stage or report -> its spec, found by scanning the code.
+"""The registry: the YAML name of a stage or report -> its spec, found through package metadata.
 
 Stages and reports mark themselves with the :func:`~topomatch.pipeline.contract.stage` and
-:func:`~topomatch.pipeline.contract.report` decorators, which only attach a spec to the
-function. No module is listed by name, so a new stage is one new module:
+:func:`~topomatch.pipeline.contract.report` decorators, which only attach a spec to the function. A
+distribution declares its own as entry points, one per name, in the groups of :data:`GROUPS`
+(topomatch's are in its ``pyproject.toml``)::
 
-- :func:`get_stage` / :func:`get_report` find the module that defines a name by reading the
-  source files of the scanned packages (:data:`SCANNED_PACKAGES`: the engine's built-in reports
-  and all of ``topomatch.stages``) for ``@stage("name"`` / ``@report("name"`` without importing
-  them, then import that one module. So a command imports only the science it runs
-  (``topomatch register`` does not load the mesh, spectral and retrieval stacks).
-- :func:`discover` imports every module of the scanned packages and collects every marked
-  function (``topomatch stages``, and the fallback for a name the text scan did not find).
+    [project.entry-points."topomatch.stages"]
+    decimate = "topomatch.stages.mesh.decimate:decimate"
 
-Two functions that claim the same name are an error. The cache may store the result types of
-the scanned packages (:func:`topomatch.pipeline.codec.allow_packages`).
+- :func:`get_stage` / :func:`get_report` find the name among the entry points of every installed
+  distribution and import that one module: a command imports only the science it runs, and a
+  user's package that declares entry points is found in every process where it is installed (Dask
+  workers included) with no call of its own. A name declared by two distributions is an error.
+- :func:`discover` imports every module of topomatch's own packages (:data:`BUILTIN_PACKAGES`) and
+  every declared entry point (``topomatch stages``). It is also the fallback for a name the metadata
+  does not declare, or declares at a place that no longer has it: an editable install reads the
+  dist-info written by the last ``pip install -e .``, so a stage added since is still found, at the
+  cost of importing every built-in module until the next install.
+- :func:`register_module` adds the stages of a module that no distribution declares (a script, a
+  notebook, a test), in this process only.
+
+Two functions that claim the same name are an error naming both modules. The cache may store the
+result types of the built-in packages and of the packages that declare entry points
+(:func:`topomatch.pipeline.codec.allow_packages`).
 """
 
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import pkgutil
-import re
 import typing
-from pathlib import Path
+from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from topomatch.pipeline.contract import ReportSpec, StageSpec
 from topomatch.pipeline.errors import ConfigError
 from topomatch.pipeline.params import Params
 
-#: Packages whose modules are imported and searched for stages and reports (recursively).
-SCANNED_PACKAGES: tuple[str, ...] = ("topomatch.pipeline.builtin_reports", "topomatch.stages")
+#: Entry-point group of each kind of function.
+GROUPS: dict[str, str] = {"stage": "topomatch.stages", "report": "topomatch.reports"}
+
+#: topomatch's own packages: every module in them is imported by :func:`discover` (recursively).
+BUILTIN_PACKAGES: tuple[str, ...] = ("topomatch.pipeline.builtin_reports", "topomatch.stages")
 
 STAGES: dict[str, StageSpec] = {}
 REPORTS: dict[str, ReportSpec] = {}
-_SCANNED: list[str] = []  # the modules searched so far, in order
-_INDEX: dict[tuple[str, str], str] = {}  # (kind, name) -> module, from the source text
-
-_DECORATOR = re.compile(r'^@(stage|report)\(\s*"([^"]+)"', re.MULTILINE)
-
-
-def _package_files(name: str) -> list[tuple[str, Path]]:
-    """(module name, source file) of a package and its sub-packages, or of one module, without
-    importing them."""
-    spec = importlib.util.find_spec(name)
-    if spec is None:
-        return []
-    if not spec.submodule_search_locations:
-        return [(name, Path(spec.origin))] if spec.origin and spec.origin.endswith(".py") else []
-    out = []
-    for folder in map(Path, spec.submodule_search_locations):
-        for path in sorted(folder.rglob("*.py")):
-            parts = path.relative_to(folder).with_suffix("").parts
-            if any(not (folder.joinpath(*parts[:i]) / "__init__.py").is_file() for i in range(1, len(parts))):
-                continue  # not inside a package
-            dotted = ".".join([name, *(parts[:-1] if parts[-1] == "__init__" else parts)])
-            out.append((dotted, path))
-    return out
+_TABLES: dict[str, dict] = {"stage": STAGES, "report": REPORTS}
+_SCANNED: list[str] = []  # the built-in modules imported by discover(), in order
+_DECLARED: dict[str, dict[str, list[EntryPoint]]] = {}  # kind -> name -> entry points, read once
 
 
-def source_index() -> dict[tuple[str, str], str]:
-    """(``'stage'`` or ``'report'``, name) -> the module whose source marks it, read once."""
-    if not _INDEX:
-        for package in SCANNED_PACKAGES:
-            for module, path in _package_files(package):
-                for kind, name in _DECORATOR.findall(path.read_text(encoding="utf-8")):
-                    _INDEX.setdefault((kind, name), module)
-    return _INDEX
+def declared(kind: str) -> dict[str, list[EntryPoint]]:
+    """Name -> the entry points that declare it, over every installed distribution, for ``kind``
+    ``'stage'`` or ``'report'`` (read from the metadata once per process)."""
+    if kind not in _DECLARED:
+        table: dict[str, list[EntryPoint]] = {}
+        for ep in entry_points(group=GROUPS[kind]):
+            table.setdefault(ep.name, []).append(ep)
+        _DECLARED[kind] = table
+    return _DECLARED[kind]
 
 
-def scanned_modules(packages: tuple[str, ...] = SCANNED_PACKAGES) -> list[str]:
+def _origin(ep: EntryPoint) -> str:
+    dist = getattr(ep, "dist", None)
+    return f"{ep.value} (distribution {dist.name})" if dist is not None else ep.value
+
+
+def _builtin(module: str) -> bool:
+    return any(module == p or module.startswith(p + ".") for p in BUILTIN_PACKAGES)
+
+
+def _load_declared(kind: str, name: str) -> bool:
+    """Import and register the module that the metadata names for ``name``; False when none is declared,
+    or when a built-in entry is out of date (then :func:`discover` finds the name)."""
+    eps = declared(kind).get(name, [])
+    if len({ep.value for ep in eps}) > 1:
+        raise ConfigError(f"{kind} {name!r} is declared twice: by " + " and by ".join(sorted(map(_origin, eps))))
+    if not eps:
+        return False
+    ep = eps[0]
+    try:
+        spec = getattr(ep.load(), f"{kind}_spec")
+        if spec.name != name:
+            raise ValueError(f"the function is the {kind} {spec.name!r}")
+    except Exception as exc:  # noqa: BLE001 - any failure to import a declared module is reported by name
+        if _builtin(ep.module):
+            return False  # metadata older than this checkout's code
+        raise ConfigError(f"{kind} {name!r}: cannot load the entry point {_origin(ep)}: "
+                          f"{type(exc).__name__}: {exc}") from None
+    _collect(importlib.import_module(ep.module))
+    return True
+
+
+def builtin_modules(packages: tuple[str, ...] = BUILTIN_PACKAGES) -> list[str]:
     """Names of every module in ``packages`` (a package's own ``__init__`` included), sorted."""
     names: list[str] = []
     for name in packages:
@@ -81,27 +103,36 @@ def scanned_modules(packages: tuple[str, ...] = SCANNED_PACKAGES) -> list[str]:
     return sorted(set(names))
 
 
-def _collect(module) -> None:
+def marked(module) -> list[StageSpec | ReportSpec]:
+    """The specs of the stages and reports defined in ``module`` (not those it imports)."""
+    specs = []
     for obj in vars(module).values():
-        if getattr(obj, "__module__", None) != module.__name__:
-            continue  # imported from elsewhere: registered by its own module
-        for attr, table in (("stage_spec", STAGES), ("report_spec", REPORTS)):
-            spec = getattr(obj, attr, None)
-            if spec is None:
-                continue
-            known = table.get(spec.name)
-            if known is not None and known.func is not spec.func:
-                raise RuntimeError(f"{attr.split('_')[0]} {spec.name!r} is defined twice: in "
-                                   f"{known.func.__module__} and {module.__name__}")
-            table[spec.name] = spec
+        if getattr(obj, "__module__", None) == module.__name__:
+            specs += [s for s in (getattr(obj, "stage_spec", None), getattr(obj, "report_spec", None)) if s is not None]
+    return specs
+
+
+def _collect(module) -> None:
+    for spec in marked(module):
+        kind = "stage" if isinstance(spec, StageSpec) else "report"
+        table = _TABLES[kind]
+        known = table.get(spec.name)
+        if known is not None and known.func is not spec.func:
+            raise ConfigError(f"{kind} {spec.name!r} is defined twice: in {known.func.__module__} and "
+                              f"{spec.func.__module__}")
+        table[spec.name] = spec
 
 
 def discover() -> dict[str, StageSpec]:
-    """Import the scanned modules (once) and register all their stages and reports; return the stages."""
+    """Import the built-in modules and every declared entry point (once) and register all their stages and
+    reports; return the stages."""
     if not _SCANNED:
-        for name in scanned_modules():
+        for name in builtin_modules():
             _collect(importlib.import_module(name))
             _SCANNED.append(name)
+        for kind in GROUPS:
+            for name in declared(kind):
+                _load_declared(kind, name)
     return STAGES
 
 
@@ -116,21 +147,18 @@ def register_module(module) -> None:
 
 def get_stage(name: str) -> StageSpec:
     """The stage called ``name``; a :class:`ConfigError` listing the known names otherwise."""
-    return _lookup(STAGES, "stage", name)
+    return _lookup("stage", name)
 
 
 def get_report(name: str) -> ReportSpec:
     """The report called ``name``; a :class:`ConfigError` listing the known names otherwise."""
-    return _lookup(REPORTS, "report", name)
+    return _lookup("report", name)
 
 
-def _lookup(table: dict, kind: str, name: str):
-    if name not in table:
-        module = source_index().get((kind, name))
-        if module is not None:
-            _collect(importlib.import_module(module))
-    if name not in table:
-        discover()  # a name the text scan could not see
+def _lookup(kind: str, name: str):
+    table = _TABLES[kind]
+    if name not in table and not _load_declared(kind, name):
+        discover()  # a name the metadata does not declare (yet)
     try:
         return table[name]
     except KeyError:
@@ -158,9 +186,13 @@ def describe_params(params: type[Params]) -> list[tuple[str, str, Any, str]]:
 
 
 def _allow_cached_types() -> None:
+    """Allow the built-in packages' types in the cache, and the package of each declared entry point's
+    module (the module itself when it is top-level): read here, in every process that runs stages."""
     from topomatch.pipeline.codec import allow_packages
 
-    allow_packages(SCANNED_PACKAGES)
+    declared_modules = {ep.module for kind in GROUPS for eps in declared(kind).values() for ep in eps
+                        if not _builtin(ep.module)}
+    allow_packages(BUILTIN_PACKAGES + tuple(m.rpartition(".")[0] or m for m in sorted(declared_modules)))
 
 
 _allow_cached_types()
