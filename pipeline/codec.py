@@ -16,9 +16,9 @@ dtype, shape, memory order and place in the blob. :func:`loads` reads it back wi
   keys and each edge attribute as one array where the values allow it (numbers of one type,
   arrays of one shape, 1-D arrays of one dtype concatenated), so a Reeb graph of hundreds of
   nodes is a dozen arrays, not hundreds of JSON objects;
-- dataclasses, named tuples, enums and pydantic models **of an allowed package**: defined in a
-  module of the packages the registry scans (``topomatch.stages``) or of a module registered
-  explicitly (:func:`allow_packages`). A type is named ``module:QualName`` in the
+- dataclasses, named tuples, enums and pydantic models **of an allowed package**: defined in
+  ``topomatch.stages``, in the package of a stage or report that a distribution declares as an
+  entry point, or in a module registered explicitly (:func:`allow_packages`). A type is named ``module:QualName`` in the
   document; on reading, the module must already be imported (it is, when the stage that returns
   the type is in the chain): a name is looked up, never imported, so data can select which of
   the project's own result types to build, nothing else.
@@ -215,7 +215,7 @@ class _Encoder:
     def known(cls: type) -> str:
         name = type_name(cls)
         if _lookup(name) is not cls:
-            raise CodecError(f"type {name} is not registered (only types of the scanned stage modules are stored)")
+            raise CodecError(f"type {name} is not registered (only types of the stage packages are stored)")
         return name
 
 

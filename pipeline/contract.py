@@ -3,8 +3,8 @@
 A stage is a plain function ``func(*consumed_state, params) -> result``; a report is a function
 ``func(experiment, results, params) -> ReportOutput``. The :func:`stage` and :func:`report`
 decorators only attach their metadata (:class:`StageSpec`, :class:`ReportSpec`) to the function;
-the engine's registry (:mod:`topomatch.pipeline.registry`) finds them by scanning the modules of
-``topomatch.stages``. Nothing here imports the runner, the cache or the CLI, and nothing here
+the engine's registry (:mod:`topomatch.pipeline.registry`) finds them by the entry points that
+their distribution declares (``pyproject.toml``). Nothing here imports the runner, the cache or the CLI, and nothing here
 knows a domain.
 
 Re-exported for the stages: the error types, :class:`Params` (typed, frozen, strict parameter

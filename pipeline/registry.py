@@ -137,8 +137,8 @@ def discover() -> dict[str, StageSpec]:
 
 
 def register_module(module) -> None:
-    """Register the stages and reports of a module outside the scanned packages (a script, a notebook,
-    a test), and allow its result types in the cache."""
+    """Register the stages and reports of a module that no distribution declares (a script, a notebook,
+    a test) in this process, and allow its result types in the cache."""
     from topomatch.pipeline.codec import allow_packages
 
     _collect(module)

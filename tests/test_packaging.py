@@ -87,6 +87,21 @@ def test_the_installed_package_works_from_any_folder(installed, tmp_path):
     assert list((tmp_path / "runs").glob("registration-demo-*/index.html"))
 
 
+@pytest.mark.slow
+def test_the_wheel_declares_its_stages_as_entry_points(installed, tmp_path):
+    """The wheel's metadata names each stage's module, so a lookup imports that module alone."""
+    code = ("import os, sys\n"
+            "from topomatch.pipeline.registry import declared, get_stage\n"
+            "(ep,) = declared('stage')['register']\n"
+            "assert str(ep.dist.locate_file('')).startswith(os.environ['PYTHONPATH']), ep.dist\n"
+            "get_stage('register')\n"
+            "print(len(declared('stage')), sorted({m.split('.')[2] for m in sys.modules if m.startswith('topomatch.stages.')}))")
+    r = _python(installed, code, tmp_path)
+    assert r.returncode == 0, r.stderr
+    count, domains = r.stdout.split(" ", 1)
+    assert int(count) >= 30 and domains.strip() == "['optimize', 'registration']"
+
+
 def _blocks(doc: str, language: str) -> list[str]:
     """The fenced ``language`` code blocks of ``doc`` (a file of the repository)."""
     return re.findall(rf"^```{language}\n(.*?)^```", (REPO_ROOT / doc).read_text(), re.S | re.M)
