@@ -49,7 +49,7 @@ def build_manifest(
     compute_seconds: float,
     total_seconds: float,
     cache_root: str | None,
-    outputs: dict[str, list[str]],
+    outputs: dict[str, dict[str, Any]],
 ) -> dict[str, Any]:
     hits = sum(sum(r.cache_hits.values()) for r in results)
     runs = sum(len(r.cache_hits) for r in results)

@@ -17,6 +17,7 @@ import inspect
 import io
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +45,29 @@ def _view_page(run_dir: Path, name: str, fragment: str) -> str:
 
 
 # --------------------------------------------------------------------------- running and writing
+
+
+@dataclass(frozen=True)
+class WrittenReport:
+    """What one report left in the run folder: its files (paths relative to the folder), its notes,
+    or the error that stopped it. The manifest stores it as ``{"files": [...], "notes": [...],
+    "error": str | null}`` under ``outputs.<label>``."""
+
+    files: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
+    error: str | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        return {"files": list(self.files), "notes": list(self.notes), "error": self.error}
+
+    @classmethod
+    def from_json(cls, value: dict[str, Any] | list[str]) -> WrittenReport:
+        """A manifest's record; also the list of releases up to 0.1.0 (paths, ``"NOTE: ..."``, ``"ERROR: ..."``)."""
+        if isinstance(value, list):
+            return cls(tuple(p for p in value if not p.startswith(("NOTE: ", "ERROR: "))),
+                       tuple(p[len("NOTE: "):] for p in value if p.startswith("NOTE: ")),
+                       next((p[len("ERROR: "):] for p in value if p.startswith("ERROR: ")), None))
+        return cls(tuple(value["files"]), tuple(value["notes"]), value["error"])
 
 
 def report_labels(experiment) -> list[tuple[str, Any]]:
@@ -89,18 +113,18 @@ def report_key(experiment, label: str, call, results) -> str:
     return hashlib.sha256(payload.encode()).hexdigest()
 
 
-def run_reports(experiment, results, *, reuse: dict[str, tuple[str, list[str]]] | None = None,
-                run_dir: Path | None = None) -> tuple[dict[str, ReportOutput | str], dict[str, list[str]], dict[str, str]]:
+def run_reports(experiment, results, *, reuse: dict[str, tuple[str, WrittenReport]] | None = None,
+                run_dir: Path | None = None) -> tuple[dict[str, ReportOutput | str], dict[str, WrittenReport], dict[str, str]]:
     """Run each configured report; a failing report is recorded as its error message.
 
-    ``reuse``: {label: (key, written paths)} of the run folder's previous manifest; a report whose key is
+    ``reuse``: {label: (key, what it wrote)} of the run folder's previous manifest; a report whose key is
     unchanged and whose files are all still in ``run_dir`` is not drawn again. Returns (outputs to write,
-    reused {label: paths}, {label: key})."""
+    reused {label: what it wrote}, {label: key})."""
     import matplotlib
 
     matplotlib.use("Agg")
     outputs: dict[str, ReportOutput | str] = {}
-    reused: dict[str, list[str]] = {}
+    reused: dict[str, WrittenReport] = {}
     keys: dict[str, str] = {}
     for label, call in report_labels(experiment):
         keys[label] = key = report_key(experiment, label, call, results)
@@ -116,10 +140,9 @@ def run_reports(experiment, results, *, reuse: dict[str, tuple[str, list[str]]] 
     return outputs, reused, keys
 
 
-def _all_present(run_dir: Path, paths: list[str]) -> bool:
+def _all_present(run_dir: Path, record: WrittenReport) -> bool:
     """Whether a report's earlier output is complete: no error, every file there."""
-    return not any(p.startswith("ERROR: ") for p in paths) and all(
-        p.startswith("NOTE: ") or (run_dir / p).is_file() for p in paths)
+    return record.error is None and all((run_dir / p).is_file() for p in record.files)
 
 
 def _cell(value: Any) -> Any:
@@ -154,15 +177,15 @@ def _relative_file(run_dir: Path, relative: str) -> Path:
 
 
 def write_report_outputs(run_dir: Path, outputs: dict[str, ReportOutput | str], *,
-                         figure_format: tuple[str, ...] | list[str] = ("png",), dpi: int = 150) -> dict[str, list[str]]:
+                         figure_format: tuple[str, ...] | list[str] = ("png",), dpi: int = 150) -> dict[str, WrittenReport]:
     """Write every table, figure (in each of ``figure_format``, raster ones at ``dpi``), file and
-    interactive view; return {report label: [relative paths, ``NOTE: ...`` or ``ERROR: ...``]}."""
+    interactive view; return {report label: what it wrote} (an output that is a string is the report's error)."""
     import matplotlib.pyplot as plt
 
-    written: dict[str, list[str]] = {}
+    written: dict[str, WrittenReport] = {}
     for label, out in outputs.items():
         if isinstance(out, str):
-            written[label] = [f"ERROR: {out}"]
+            written[label] = WrittenReport(error=out)
             continue
         paths = []
         for name, rows in out.tables.items():
@@ -181,8 +204,7 @@ def write_report_outputs(run_dir: Path, outputs: dict[str, ReportOutput | str], 
         for name, fragment in out.html.items():
             atomic_write_text(run_dir / "views" / f"{name}.html", _view_page(run_dir, name, fragment))
             paths.append(f"views/{name}.html")
-        paths += [f"NOTE: {n}" for n in out.notes]
-        written[label] = paths
+        written[label] = WrittenReport(tuple(paths), tuple(out.notes))
     return written
 
 
@@ -265,17 +287,16 @@ figure{margin:1em 0} figure img{max-width:100%;border:1px solid #eee} figcaption
 """
 
 
-def _summary(experiment, results, manifest: dict) -> str:
+def _summary(experiment, manifest: dict, written: dict[str, WrittenReport]) -> str:
     esc = html.escape
     n_failed = manifest["n_failed"]
     stages = " &rarr; ".join(esc(c.label) for c in experiment.calls)
     sweep = "; ".join(f"{esc(k)}: {esc(', '.join(map(str, v)))}" for k, v in experiment.raw.sweep.items()) or "none"
     status = (f"<span class='err'>{n_failed} of {manifest['n_items']} items failed</span> (listed below)"
               if n_failed else f"<span class='ok'>all {manifest['n_items']} items ok</span>")
-    outputs = manifest.get("outputs", {})
-    failed_reports = [label for label, files in outputs.items() if any(f.startswith("ERROR: ") for f in files)]
+    failed_reports = [label for label, record in written.items() if record.error is not None]
     if failed_reports:  # the items can all be fine while a report of them is not
-        status += (f"; <span class='err'>{len(failed_reports)} of {len(outputs)} reports failed</span> "
+        status += (f"; <span class='err'>{len(failed_reports)} of {len(written)} reports failed</span> "
                    f"({esc(', '.join(failed_reports))}: the error is in their section)")
     reports = ", ".join(esc(call.name) for call in experiment.reports) or "none"
     return (
@@ -301,18 +322,17 @@ def _figure_paths(paths: list[str]) -> dict[str, list[str]]:
     return out
 
 
-def _section(run_dir: Path, label: str, call, paths: list[str], number: int, figures: list[int]) -> str:
+def _section(run_dir: Path, label: str, call, record: WrittenReport, number: int, figures: list[int]) -> str:
     """One report's section; ``figures`` holds the running figure count (updated)."""
     esc = html.escape
     title, caption = report_heading(call) if call is not None else (humanise(label), "")
     parts = [f"<h2 id='r{number}'>{esc(title)} <span class='kind'>({esc(label)})</span></h2>"]
     if caption:
         parts.append(f"<p>{esc(caption)}</p>")
-    for p in paths:
-        if p.startswith("ERROR: "):
-            parts.append(f"<p class='err'>{esc(p)}</p>")
-        elif p.startswith("NOTE: "):
-            parts.append(f"<p>{esc(p[6:])}</p>")
+    if record.error is not None:
+        parts.append(f"<p class='err'>Error: {esc(record.error)}</p>")
+    parts += [f"<p>{esc(note)}</p>" for note in record.notes]
+    paths = record.files
     for stem, files in _figure_paths(paths).items():
         figures[0] += 1
         shown = next((f for f in files if f.endswith((".png", ".svg"))), None)
@@ -330,14 +350,14 @@ def _section(run_dir: Path, label: str, call, paths: list[str], number: int, fig
             rows = json.loads((run_dir / p.replace(".csv", ".json")).read_text())
             parts.append(f"<h3>Table: {esc(humanise(Path(p).stem))} <span class='kind'>(<a href='{esc(p)}'>CSV</a>, "
                          f"{len(rows)} rows)</span></h3>" + html_table(rows))
-    others = [p for p in paths if not p.startswith(("ERROR: ", "NOTE: ", "figures/", "views/", "tables/"))]
+    others = [p for p in paths if not p.startswith(("figures/", "views/", "tables/"))]
     if others:
         parts.append(f"<details><summary>{len(others)} files written</summary><ul>"
                      + "".join(f"<li><a href='{esc(p)}'>{esc(p)}</a></li>" for p in others) + "</ul></details>")
     return "\n".join(parts)
 
 
-def write_index_html(run_dir: Path, experiment, results, manifest: dict, written: dict[str, list[str]]) -> None:
+def write_index_html(run_dir: Path, experiment, results, manifest: dict, written: dict[str, WrittenReport]) -> None:
     """A single page with the run's summary, then each report's figures, views and tables, then all items."""
     esc = html.escape
     calls = dict(report_labels(experiment))
@@ -349,7 +369,7 @@ def write_index_html(run_dir: Path, experiment, results, manifest: dict, written
         *(f"<script src='{esc(s)}'></script>" for s in scripts),
         "</head><body>",
         f"<h1>{esc(experiment.name)}</h1><p>{esc(experiment.raw.description)}</p>",
-        _summary(experiment, results, manifest),
+        _summary(experiment, manifest, written),
     ]
     failed = [r for r in results if not r.ok]
     if failed:
@@ -360,8 +380,8 @@ def write_index_html(run_dir: Path, experiment, results, manifest: dict, written
             f"<li><a href='#r{i}'>{esc(report_heading(calls[label])[0] if label in calls else humanise(label))}</a></li>"
             for i, (label, _) in enumerate(sections, 1)) + "<li><a href='#items'>All items</a></li></ul></nav>")
     figures = [0]
-    for i, (label, paths) in enumerate(sections, 1):
-        parts.append(_section(run_dir, label, calls.get(label), paths, i, figures))
+    for i, (label, record) in enumerate(sections, 1):
+        parts.append(_section(run_dir, label, calls.get(label), record, i, figures))
     parts.append("<h2 id='items'>All items</h2><p>One row per input and sweep point: the summary of every stage "
                  "(<a href='tables/results.csv'>CSV</a>).</p>" + html_table([r.row() for r in results]))
     parts.append("</body></html>")

@@ -33,6 +33,7 @@ from topomatch.pipeline.manifest import build_manifest
 from topomatch.pipeline.reports import (
     run_reports,
     write_index_html,
+    WrittenReport,
     write_report_outputs,
     write_table,
 )
@@ -44,14 +45,14 @@ CACHE_DIRNAME = ".cache"
 INCOMPLETE = "INCOMPLETE"
 
 
-def _previous_reports(run_dir: Path) -> dict[str, tuple[str, list[str]]]:
-    """{report label: (key, written paths)} from the run folder's last complete manifest, if any (an
-    unreadable or older manifest: nothing to reuse)."""
+def _previous_reports(run_dir: Path) -> dict[str, tuple[str, WrittenReport]]:
+    """{report label: (key, what it wrote)} from the run folder's last complete manifest, if any (an
+    unreadable manifest: nothing to reuse; one of an earlier release is read too)."""
     try:
         manifest = json.loads((run_dir / "manifest.json").read_text())
         keys, outputs = manifest.get("report_keys", {}), manifest.get("outputs", {})
-        return {label: (key, list(outputs[label])) for label, key in keys.items() if label in outputs}
-    except (OSError, ValueError, AttributeError, TypeError):
+        return {label: (key, WrittenReport.from_json(outputs[label])) for label, key in keys.items() if label in outputs}
+    except (OSError, ValueError, AttributeError, TypeError, KeyError):
         return {}
 
 
@@ -121,7 +122,8 @@ def run_experiment(
     written = {label: reused[label] if label in reused else drawn[label] for label in report_keys}
     manifest = build_manifest(
         experiment, results, started=started, compute_seconds=compute_seconds,
-        total_seconds=time.perf_counter() - t0, cache_root=cache_root, outputs=written,
+        total_seconds=time.perf_counter() - t0, cache_root=cache_root,
+        outputs={label: record.to_json() for label, record in written.items()},
     )
     manifest["report_keys"] = report_keys
     manifest["reports_reused"] = sorted(reused)

@@ -73,6 +73,28 @@ def test_a_second_run_reuses_unchanged_reports_and_redraws_changed_ones(small_co
     assert fourth.manifest["reports_reused"] == []
 
 
+def test_a_run_folder_of_the_previous_release_is_read(small_config, tmp_path):
+    """Its manifest listed a report's notes and error among the paths (``"NOTE: ..."``, ``"ERROR: ..."``): a
+    complete report is reused, a failed one drawn again, and the manifest is rewritten with typed records."""
+    small_config["reports"] = [{"table": {"name": "areas", "columns": ["item", "measures.area*"]}},
+                               {"table": {"name": "names", "columns": ["item"]}}]
+    first = _run(small_config, tmp_path)
+    assert first.manifest["outputs"]["table"] == {"files": ["tables/areas.csv", "tables/areas.json"], "notes": [],
+                                                  "error": None}
+    path = first.run_dir / "manifest.json"
+    old = json.loads(path.read_text())
+    old["outputs"] = {"table": ["tables/areas.csv", "tables/areas.json", "NOTE: drawn by 0.1.0"],
+                      "table#1": ["ERROR: report table#1 failed: ValueError: no"]}
+    path.write_text(json.dumps(old))
+    second = _run(small_config, tmp_path)
+    assert second.manifest["reports_reused"] == ["table"]
+    assert second.manifest["outputs"] == {
+        "table": {"files": ["tables/areas.csv", "tables/areas.json"], "notes": ["drawn by 0.1.0"], "error": None},
+        "table#1": {"files": ["tables/names.csv", "tables/names.json"], "notes": [], "error": None}}
+    page = (second.run_dir / "index.html").read_text()
+    assert "<p>drawn by 0.1.0</p>" in page and "all 4 items ok</span></dd>" in page
+
+
 def test_changed_param_recomputes_only_downstream(small_config, tmp_path):
     _run(small_config, tmp_path)
     small_config["stages"][2] = {"noise": {"sigma": 0.0, "relative_to": "bbox_diagonal", "seed": 4}}

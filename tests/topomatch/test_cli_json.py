@@ -65,11 +65,15 @@ def test_every_command_output_validates(capsys, tmp_path, labelled_db):
 def test_run_json(capsys, tmp_path):
     config = tmp_path / "c.yaml"
     config.write_text(yaml.safe_dump({"name": "j", "inputs": {"meshes": [str(BUNDLED_MESHES / "torus.off")]},
-                                      "stages": ["load", "measures"], "reports": [{"table": {"name": "t"}}]}))
+                                      "stages": ["load", "measures"],
+                                      "reports": [{"table": {"name": "t"}}, "accuracy_summary"]}))
     code, document, err, _ = run_json(capsys, "run", config, "--out", tmp_path / "runs", "--no-progress")
     assert code == 0
     check(document, "run")
     assert document["n_items"] == 1 and document["outputs"]["table"] == ["tables/t.csv", "tables/t.json"]
+    # a report's notes are not files
+    assert document["outputs"]["accuracy_summary"] == [] and document["report_errors"] == []
+    assert document["report_notes"] == {"accuracy_summary": ["no evaluate results"]}
     assert (tmp_path / "runs" / document["run_dir"].rsplit("/", 1)[-1] / "index.html").is_file()
 
 

@@ -80,23 +80,27 @@ def cmd_run(args: argparse.Namespace) -> int:
         progress=not args.no_progress and verbosity() >= 0,
     )
     m = outcome.manifest
-    errors = [p[7:] for paths in m["outputs"].values() for p in paths if p.startswith("ERROR: ")]
+    records = m["outputs"]  # {label: {"files", "notes", "error"}}
+    errors = [r["error"] for r in records.values() if r["error"] is not None]
     if args.json:
         print_json({"name": experiment.name, "config": str(experiment.source) if experiment.source else None,
                     "run_dir": str(outcome.run_dir), "index_html": str(outcome.run_dir / "index.html"),
                     "n_items": n, "n_failed": len(outcome.failed), "seconds": m["seconds"],
                     "cache": {"hits": m["cache"]["hits"], "stage_results": m["cache"]["stage_results"]},
                     "failures": [r.error for r in outcome.failed], "report_errors": errors,
-                    "outputs": {k: [p for p in v if not p.startswith("ERROR: ")] for k, v in m["outputs"].items()}})
+                    "outputs": {k: r["files"] for k, r in records.items()},
+                    "report_notes": {k: r["notes"] for k, r in records.items() if r["notes"]}})
     else:
         print(f"wrote {outcome.run_dir}/index.html  ({m['seconds']['compute']:.1f} s, "
               f"cache hits {m['cache']['hits']}/{m['cache']['stage_results']})")
-        n_files = sum(1 for paths in m["outputs"].values() for p in paths if not p.startswith(("ERROR: ", "NOTE: ")))
+        n_files = sum(len(r["files"]) for r in records.values())
         if verbosity() < 1:
-            info(f"  {n_files} output files of {len(m['outputs'])} reports (-v lists them)")
-        for label, paths in m["outputs"].items():
-            for p in paths:
+            info(f"  {n_files} output files of {len(records)} reports (-v lists them)")
+        for label, r in records.items():
+            for p in r["files"]:
                 info(f"  {label}: {p}", level=1)
+            for note in r["notes"]:
+                info(f"  {label}: note: {note}", level=1)
     if outcome.failed:
         lines = "\n".join(f"  {r.error}" for r in outcome.failed)
         raise RunError(f"{len(outcome.failed)} of {n} items failed (the others were written):\n{lines}")

@@ -77,8 +77,8 @@ def test_export_refuses_a_stage_that_makes_no_mesh(tmp_path):
               "stages": ["load", {"morse": {"function": "mixture"}}],
               "reports": [{"export": {"meshes": ["morse"]}}]}
     outcome = run_experiment(build_experiment(config), out_root=tmp_path, progress=False)
-    assert outcome.manifest["outputs"]["export"] == [
-        "ERROR: report export failed: ConfigError: export: stage 'morse' produces no mesh; choose among ['load']"]
+    assert outcome.manifest["outputs"]["export"] == {"files": [], "notes": [], "error":
+        "report export failed: ConfigError: export: stage 'morse' produces no mesh; choose among ['load']"}
     # the page's status says so next to the items' (it said "all 1 items ok" in green and nothing else)
     page = (outcome.run_dir / "index.html").read_text()
     assert "all 1 items ok" in page and "1 of 1 reports failed</span> (export: the error is in their section)" in page
@@ -149,7 +149,7 @@ def test_reports_that_would_draw_nothing_fail_with_what_is_wrong(tmp_path):
                           {"skeleton_gallery": {"name": "g", "where": {"level_sets.levels": 99}}},
                           {"table": {"name": "t", "columns": ["nothing.*"]}}]}
     outcome = run_experiment(build_experiment(config), out_root=tmp_path, progress=False)
-    errors = {k: v[0] for k, v in outcome.manifest["outputs"].items()}
+    errors = {k: v["error"] for k, v in outcome.manifest["outputs"].items()}
     assert "level_sets.levls is not a sweep key of the config (sweep keys: level_sets.levels)" in errors["skeleton_stability"]
     assert "where {'level_sets.levels': 99} matches none of the 2 items" in errors["skeleton_gallery"]
     assert "the columns ['nothing.*'] match no results column" in errors["table"]
