@@ -201,7 +201,7 @@ def _stored_pixel_id(path: Path):
     """The pixel type of a SimpleITK-readable file (None for Pillow formats, folders and slices' volumes)."""
     import SimpleITK as sitk
 
-    from topomatch.stages.registration.io import PILLOW_SUFFIXES, image_format
+    from topomatch.stages.imaging.files import PILLOW_SUFFIXES, image_format
 
     if not path.is_file() or image_format(path) in PILLOW_SUFFIXES:
         return None
@@ -241,7 +241,8 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     import SimpleITK as sitk
 
     from topomatch.stages.registration.interpolation import resample
-    from topomatch.stages.registration.io import keep_locale, output_suffix, to_sitk, write_transform
+    from topomatch.stages.imaging.files import keep_locale, output_suffix
+    from topomatch.stages.registration.io import to_sitk, write_transform
     from topomatch.stages.registration.reports import overlay_figure
 
     out = Path(out)
