@@ -287,7 +287,8 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
 
         save(out / f"moving_resampled{suffix}", write=write_image)
     save(out / "transform.tfm", write=lambda tmp: write_transform(reg.transform, tmp))
-    fig = overlay_figure(fixed, moving, reg, title=f"{Path(outcome.fixed).name} <- {moving_path.name}")
+    fig = overlay_figure([(fixed, moving, reg, f"{Path(outcome.fixed).name} <- {moving_path.name}")],
+                         top=0.9 if fixed.dim == 2 else 0.95, bottom=0.12 if fixed.dim == 2 else 0.02, hspace=0.25)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100 if fixed.dim == 3 else 110, bbox_inches="tight")
     plt.close(fig)
