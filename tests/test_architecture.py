@@ -26,7 +26,7 @@ ROOTS = {"topomatch": REPO_ROOT / "topomatch", "topomatch.pipeline": REPO_ROOT /
          "topomatch.stages": REPO_ROOT / "stages"}
 
 #: The domains, lower first: a domain may import the ones before it.
-DOMAIN_ORDER = ("optimize", "mesh", "adapters", "spectral", "morse", "reeb", "matching", "retrieval", "registration",
+DOMAIN_ORDER = ("optimize", "imaging", "mesh", "adapters", "spectral", "morse", "reeb", "matching", "retrieval", "registration",
                 "crosscheck")
 
 

@@ -201,7 +201,7 @@ def _stored_pixel_id(path: Path):
     """The pixel type of a SimpleITK-readable file (None for Pillow formats, folders and slices' volumes)."""
     import SimpleITK as sitk
 
-    from topomatch.stages.registration.io import PILLOW_SUFFIXES, image_format
+    from topomatch.stages.imaging.files import PILLOW_SUFFIXES, image_format
 
     if not path.is_file() or image_format(path) in PILLOW_SUFFIXES:
         return None
@@ -241,7 +241,8 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     import SimpleITK as sitk
 
     from topomatch.stages.registration.interpolation import resample
-    from topomatch.stages.registration.io import keep_locale, output_suffix, to_sitk, write_transform
+    from topomatch.stages.imaging.files import keep_locale, output_suffix
+    from topomatch.stages.registration.io import to_sitk, write_transform
     from topomatch.stages.registration.reports import overlay_figure
 
     out = Path(out)
@@ -286,7 +287,8 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
 
         save(out / f"moving_resampled{suffix}", write=write_image)
     save(out / "transform.tfm", write=lambda tmp: write_transform(reg.transform, tmp))
-    fig = overlay_figure(fixed, moving, reg, title=f"{Path(outcome.fixed).name} <- {moving_path.name}")
+    fig = overlay_figure([(fixed, moving, reg, f"{Path(outcome.fixed).name} <- {moving_path.name}")],
+                         top=0.9 if fixed.dim == 2 else 0.95, bottom=0.12 if fixed.dim == 2 else 0.02, hspace=0.25)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=100 if fixed.dim == 3 else 110, bbox_inches="tight")
     plt.close(fig)

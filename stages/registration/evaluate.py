@@ -56,8 +56,7 @@ def truth_transform(truth: dict[str, Any] | None, fixed: Image) -> RigidTransfor
         center = [float(c) for c in truth.get("center", fixed.center)]
     except (TypeError, ValueError) as exc:
         raise StageError(f"truth values must be numbers, got {truth} ({exc})") from None
-    k = n_angles(fixed.dim)
-    return RigidTransform(tuple(math.radians(a) for a in values[:k]) + tuple(values[k:]), center).with_center(fixed.center)
+    return RigidTransform.from_degrees(values, center).with_center(fixed.center)
 
 
 def tre_points(fixed: Image, region: str | None = None, max_points: int = 50000) -> np.ndarray:
@@ -120,17 +119,11 @@ def evaluate_registration(fixed: Image, registration: Registration, truth: dict[
                           math.degrees(math.acos(max(-1.0, min(1.0, cos)))), float(np.linalg.norm(d[k:])), mean,
                           float(tre.max()), bool(mean <= params.threshold) if math.isfinite(mean) else False,
                           not registration.ok, registration.seconds,
-                          dict(zip(true_t.names, (*true_t.angles_deg, *map(float, true_t.translation)))))
+                          true_t.degrees())
 
 
 @stage("evaluate", params=EvaluateParams, version=2, consumes=("fixed", "registration", "truth"))
 def evaluate(fixed: Image, registration: Registration, truth, *, params: EvaluateParams) -> EvaluateResult:
     """Errors per parameter, rotation and translation errors and mean/max target registration error against the
     known transform."""
-    return evaluate_registration(fixed, registration, truth, params)
-
-
-@stage("evaluate_3d", params=EvaluateParams, version=2, consumes=("fixed", "registration", "truth"))
-def evaluate_3d(fixed: Image, registration: Registration, truth, *, params: EvaluateParams) -> EvaluateResult:
-    """The ``evaluate`` stage under its 3D name of the previous release (kept for a release)."""
     return evaluate_registration(fixed, registration, truth, params)

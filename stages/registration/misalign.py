@@ -14,7 +14,6 @@ angle uniformly in ``[-max_angle, max_angle]``, from ``numpy.random.default_rng(
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -119,11 +118,6 @@ def make_case(source: Image, index: int, *, seed: int, multimodal: bool, crop: b
     return Case(f"{source.name}-{kind}-{index}", fixed, moving, truth, multimodal, crop)
 
 
-def truth_dict(t: RigidTransform) -> dict[str, float]:
-    """The parameters of a true transform by name (angles in degrees), as a config's ``truth``."""
-    return dict(zip(t.names, (*t.angles_deg, *map(float, t.translation))))
-
-
 class MisalignParams(Params):
     """Parameters of :func:`misalign` and :func:`misalign_pair`."""
 
@@ -148,12 +142,12 @@ class MisalignParams(Params):
         if self.index is not None:
             rng = np.random.default_rng([self.seed, self.index])
             return random_transform(rng, center, max_angle=self.max_angle, max_translation=self.max_translation)
-        k = n_angles(len(center))
-        theta = self.theta if self.theta is not None else [0.0] * (k + len(center))
-        if len(theta) != k + len(center):
-            raise StageError(f"misalign.theta needs {k + len(center)} values for a {len(center)}D image "
-                             f"({', '.join(RigidTransform.identity(center).names)}), got {len(theta)}")
-        return RigidTransform(tuple(math.radians(a) for a in theta[:k]) + tuple(theta[k:]), tuple(center))
+        names = RigidTransform.identity(center).names
+        theta = self.theta if self.theta is not None else [0.0] * len(names)
+        if len(theta) != len(names):
+            raise StageError(f"misalign.theta needs {len(names)} values for a {len(center)}D image "
+                             f"({', '.join(names)}), got {len(theta)}")
+        return RigidTransform.from_degrees(theta, center)
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,7 +174,7 @@ def _moving(source: Image, T: RigidTransform, params: MisalignParams, stream: in
 def misalign(image: Image, *, params: MisalignParams) -> MisalignResult:
     """Fixed = the image; moving = the image moved by a known rigid transform (given or random)."""
     T = params.transform(image.center)
-    return MisalignResult(image, _moving(image, T, params, 1), truth_dict(T))
+    return MisalignResult(image, _moving(image, T, params, 1), T.degrees())
 
 
 @stage("misalign_pair", params=MisalignParams, version=2, consumes=("fixed", "moving", "truth"),
@@ -192,4 +186,4 @@ def misalign_pair(fixed: Image, moving: Image, truth, *, params: MisalignParams)
     if moving.shape != fixed.shape:
         raise StageError(f"misalign_pair needs images of one size, got fixed {fixed.shape} and moving {moving.shape}")
     T = params.transform(fixed.center)
-    return MisalignResult(fixed, _moving(moving, T, params, 2), truth_dict(T))
+    return MisalignResult(fixed, _moving(moving, T, params, 2), T.degrees())

@@ -143,7 +143,7 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
 
     from topomatch.stages.registration.divergence import conditionals, jensen_tsallis_histogram
     from topomatch.stages.registration.histogram import Binning, JointHistogram
-    from topomatch.stages.registration.transform import RigidTransform, n_angles
+    from topomatch.stages.registration.transform import RigidTransform
 
     figures, table = {}, []
     for r in results:
@@ -155,8 +155,7 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
         n = len(params.transforms)
         fig, axes = plt.subplots(2, n, figsize=(3.3 * n, 6.2), squeeze=False)
         for k, theta in enumerate(params.transforms):
-            t = RigidTransform(tuple(np.radians(theta[: n_angles(image.dim)])) + tuple(theta[n_angles(image.dim):]),
-                               tuple(image.center))
+            t = RigidTransform.from_degrees(theta, image.center)
             h, _ = jh(np.asarray(t.parameters))
             P, w = conditionals(h)
             jt = jensen_tsallis_histogram(h, params.alpha)
@@ -365,15 +364,16 @@ def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
                     transform=axes[0][0].transAxes, fontsize=8, color="#b00" if flag else "k")
 
 
-def overlay_figure(fixed, moving, registration, title: str = ""):
-    """A figure of :func:`draw_overlay` (one row for a 2D image, three for a volume)."""
+def overlay_figure(pairs, **margins):
+    """A figure of :func:`draw_overlay` per (fixed, moving, registration, title) of ``pairs``, one under the other
+    (one row for a 2D image, three for a volume); ``margins``: ``top``, ``bottom``, ``hspace`` of the layout."""
     import matplotlib.pyplot as plt
 
-    rows = len(planes(fixed))
-    fig, axes = plt.subplots(rows, 5, figsize=(16, 3.9 * rows), squeeze=False)
-    draw_overlay(axes, fixed, moving, registration, title)
-    fig.subplots_adjust(left=0.01, right=0.99, top=0.9 if rows == 1 else 0.95, bottom=0.12 if rows == 1 else 0.02,
-                        wspace=0.05, hspace=0.25)
+    rows = [len(planes(fixed)) for fixed, *_ in pairs]
+    fig, axes = plt.subplots(sum(rows), 5, figsize=(16, 3.9 * sum(rows)), squeeze=False)
+    for k, (fixed, moving, registration, title) in enumerate(pairs):
+        draw_overlay(axes[sum(rows[:k]): sum(rows[:k + 1])], fixed, moving, registration, title)
+    fig.subplots_adjust(left=0.01, right=0.99, wspace=0.05, **margins)
     return fig
 
 
@@ -400,17 +400,11 @@ class OverlayParams(Params):
 @report("registration_overlay", params=OverlayParams)
 def registration_overlay_report(experiment, results, params: OverlayParams) -> ReportOutput:
     """Fixed, moving, checkerboards before/after and a colour overlay after registration, per item."""
-    import matplotlib.pyplot as plt
-
     chosen = registered_items(results, params.method, params.max_items)
     if not chosen:
         return ReportOutput(notes=["no registered items to draw"])
-    rows = [len(planes(r.final("fixed"))) for r, _ in chosen]
-    fig, axes = plt.subplots(sum(rows), 5, figsize=(16, 3.9 * sum(rows)), squeeze=False)
-    for k, (r, reg) in enumerate(chosen):
-        first = sum(rows[:k])
-        draw_overlay(axes[first: first + rows[k]], r.final("fixed"), r.final("moving"), reg, title=_label(r))
-    fig.subplots_adjust(left=0.01, right=0.99, top=0.95, bottom=0.05, wspace=0.05, hspace=0.3)
+    fig = overlay_figure([(r.final("fixed"), r.final("moving"), reg, _label(r)) for r, reg in chosen], top=0.95,
+                         bottom=0.05, hspace=0.3)
     return ReportOutput(figures={params.name: fig})
 
 
@@ -434,9 +428,7 @@ def registration_table_report(experiment, results, params: RegistrationTablePara
         regs = [res.registration for res in _of_type(r, RegisterResult)]
         for k, reg in enumerate(regs):
             ev = next((e for e in evals if e.method == reg.method), None)
-            t = reg.transform
-            row = {"item": r.item_id, "input": _label(r), "method": reg.method,
-                   **dict(zip(t.names, (*t.angles_deg, *map(float, t.translation))))}
+            row = {"item": r.item_id, "input": _label(r), "method": reg.method, **reg.transform.degrees()}
             if ev is not None:
                 row.update({f"true_{k}": v for k, v in ev.truth.items()})
                 row.update({**{f"d_{k}": v for k, v in ev.errors.items()}, "d_rotation": ev.d_rotation,

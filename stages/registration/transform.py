@@ -78,6 +78,12 @@ class RigidTransform:
         return cls((0.0,) * len(NAMES[len(center)]), tuple(center))
 
     @classmethod
+    def from_degrees(cls, theta, center) -> "RigidTransform":
+        """A transform from parameters in SimpleITK's order with the angles in degrees (a config's ``theta``)."""
+        k = n_angles(len(center))
+        return cls(tuple(math.radians(a) for a in theta[:k]) + tuple(theta[k:]), tuple(center))
+
+    @classmethod
     def euler2d(cls, tx: float, ty: float, angle_deg: float, center) -> "RigidTransform":
         """A 2D transform from ``(tx, ty, angle)`` with the angle in degrees (the 2D tables' convention)."""
         return cls((math.radians(angle_deg), tx, ty), tuple(center))
@@ -102,6 +108,10 @@ class RigidTransform:
     @property
     def translation(self) -> np.ndarray:
         return np.array(self.parameters[n_angles(self.dim):])
+
+    def degrees(self) -> dict[str, float]:
+        """The parameters by name, angles in degrees (a config's ``truth``, a table's columns)."""
+        return dict(zip(self.names, (*self.angles_deg, *map(float, self.translation))))
 
     # the 2D tables' names: translation in physical units (pixels for a PNG), angle in degrees
     tx = property(lambda self: float(self.translation[0]))
@@ -176,10 +186,6 @@ class RigidTransform:
         M[:d, :d] = np.asarray(tr.GetMatrix()).reshape(d, d)
         M[:d, d] = np.asarray(tr.GetTranslation()) + c - M[:d, :d] @ c
         return cls.from_matrix(M, c if center is None else center)
-
-
-RigidTransform3D = RigidTransform
-"""The name of the 3D transform before 2D and 3D shared one (kept for a release)."""
 
 
 def from_thesis(tx: float, ty: float, angle: float, center) -> RigidTransform:

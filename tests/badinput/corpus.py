@@ -666,7 +666,7 @@ def _dicom_series(*, skip: int | None = None) -> Callable[[Path], None]:
     """The bundled T1 volume as a DICOM series (one file per slice, positions and orientation set), in the
     folder ``path``; ``skip``: that slice's file left out, as a copy that lost a file leaves it."""
     def write(path: Path) -> None:
-        from topomatch.stages.registration.io import keep_locale
+        from topomatch.stages.imaging.files import keep_locale
 
         with keep_locale():  # GDCM sets the process locale to "C" and leaves it (the test process's text I/O)
             _write_series(path)

@@ -8,8 +8,9 @@ import pytest
 
 from tests_paths import ITK_DIR
 from topomatch.pipeline.errors import InputError
-from topomatch.stages.registration.io import (LoadImageParams, LoadPairParams, keep_locale, load_image, load_pair,
-                                              read_image, read_pair, read_volume)
+from topomatch.stages.imaging.files import keep_locale
+from topomatch.stages.registration.io import (LoadImageParams, LoadPairParams, load_image, load_pair, read_image,
+                                              read_pair, read_volume)
 
 sitk = pytest.importorskip("SimpleITK")
 
