@@ -177,6 +177,64 @@ def build(sources: Path, root: Path) -> dict[str, int]:
     return built
 
 
+#: Methods measured alone on each collection besides the default's parts (the catalogue's other single methods
+#: that need no skeleton of the thesis; ``--thesis`` adds rgpd and srg).
+EXTRA_METHODS = ("sdgdm", "shapedna-full")
+
+
+def measure(root: Path, args) -> None:
+    """Index both collections and write every method's NN / mAP (the project's evaluator) and the agreement rules'."""
+    from dataclasses import replace
+
+    from retrieval_selection import load, nn_map
+
+    from topomatch.retrieval import index, open_index
+    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, FUSION_PARTS, get_method
+    from topomatch.stages.retrieval.fusion import decide, fused_matrix
+
+    names = [n for n in ("poses_tune", "poses_report") if (root / n / "labels.csv").is_file()]
+    if not names:
+        print(f"{root}: no pose collections (academic-use data, not bundled): run extract and build first -- skipped")
+        return
+    extra = EXTRA_METHODS + (("rgpd", "srg") if args.thesis else ())
+    out = {"root": str(root), "collections": {}}
+    base = get_method(DEFAULT_METHOD).fusion
+    for name in names:
+        folder, db = root / name, root / f"{name}.db"
+        timings = {}
+        for method in (DEFAULT_METHOD,) + extra:
+            report = index([folder], db, method=method, labels=folder / "labels.csv", workers=args.workers)
+            timings[method] = round(report.seconds, 1)
+            if report.failed:
+                print(f"{name}: {report.failed} meshes failed for {method}")
+        collection = open_index(db)
+        rows = {}
+        for method in FUSION_PARTS + extra + ("topomatch-equal", DEFAULT_METHOD):
+            ev = collection.evaluate(method=method)
+            rows[method] = {"nn": round(float(ev.metrics.micro["nn"]), 4), "map": round(float(ev.metrics.micro["map"]), 4)}
+            if ev.decision:
+                rows[method]["decision"] = ev.decision
+        mats, labels = load(str(db))
+        part_list = [mats[p] for p in base.parts]
+        rules = {}
+        for rule in ("mean", "consensus", "iterative"):
+            for screen in (0.5, 0.6, 0.65, 0.7, 0.8, 0.9):
+                fusion = replace(base, agreement_rule=rule, screen=screen)
+                decision = decide(part_list, fusion)
+                nn, ap = nn_map(fused_matrix(part_list, fusion, decision), labels)
+                rules[f"{rule} {screen:g}"] = {"nn": round(nn, 4), "map": round(ap, 4), "kept": list(decision.kept),
+                                               "agreement": {p: round(a, 3) for p, a in decision.agreement.items()}}
+        out["collections"][name] = {"n": int(len(labels)), "classes": int(len(set(labels))), "methods": rows,
+                                    "agreement_rules": rules, "index_seconds": timings}
+        print(f"\n{name} ({len(labels)} meshes, {len(set(labels))} classes)")
+        for method, r in rows.items():
+            print(f"  {method:16s} {r['nn']:.3f} / {r['map']:.3f}" + (f"  kept {r['decision']['kept']}" if "decision" in r else ""))
+        for setting, r in rules.items():
+            print(f"  {setting:16s} {r['nn']:.3f} / {r['map']:.3f}  kept {r['kept']}")
+    if args.json:
+        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("command", choices=["extract", "build", "measure"])
@@ -184,6 +242,7 @@ def main() -> None:
     ap.add_argument("--mirrors", type=Path, default=Path("/work/.mirror"), help="extract: the bare git snapshots")
     ap.add_argument("--json", help="measure: write the results here")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--thesis", action="store_true", help="measure: also the thesis's skeleton methods (rgpd, srg)")
     args = ap.parse_args()
     root = root_folder(args.root)
     if args.command == "extract":
