@@ -192,7 +192,7 @@ def measure(root: Path, args) -> None:
     from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, FUSION_PARTS, get_method
     from topomatch.stages.retrieval.fusion import decide, fused_matrix
 
-    names = [n for n in ("poses_tune", "poses_report") if (root / n / "labels.csv").is_file()]
+    names = [n for n in args.only or ("poses_tune", "poses_report") if (root / n / "labels.csv").is_file()]
     if not names:
         print(f"{root}: no pose collections (academic-use data, not bundled): run extract and build first -- skipped")
         return
@@ -232,7 +232,11 @@ def measure(root: Path, args) -> None:
         for setting, r in rules.items():
             print(f"  {setting:16s} {r['nn']:.3f} / {r['map']:.3f}  kept {r['kept']}")
     if args.json:
-        Path(args.json).write_text(json.dumps(out, indent=1) + "\n")
+        path = Path(args.json)
+        if path.is_file():  # measured one collection at a time (tune first): keep the others
+            before = json.loads(path.read_text())
+            out["collections"] = {**before.get("collections", {}), **out["collections"]}
+        path.write_text(json.dumps(out, indent=1) + "\n")
 
 
 def main() -> None:
@@ -242,6 +246,7 @@ def main() -> None:
     ap.add_argument("--mirrors", type=Path, default=Path("/work/.mirror"), help="extract: the bare git snapshots")
     ap.add_argument("--json", help="measure: write the results here")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--only", nargs="*", help="measure: only these collections (poses_tune, poses_report)")
     ap.add_argument("--thesis", action="store_true", help="measure: also the thesis's skeleton methods (rgpd, srg)")
     args = ap.parse_args()
     root = root_folder(args.root)
