@@ -212,8 +212,8 @@ def measure(root: Path, args) -> None:
         for method in FUSION_PARTS + extra + ("topomatch-equal", DEFAULT_METHOD):
             ev = collection.evaluate(method=method)
             rows[method] = {"nn": round(float(ev.metrics.micro["nn"]), 4), "map": round(float(ev.metrics.micro["map"]), 4)}
-            if ev.decision:
-                rows[method]["decision"] = ev.decision
+            if ev.fusion:
+                rows[method]["decision"] = ev.fusion
         mats, labels = load(str(db))
         part_list = [mats[p] for p in base.parts]
         rules = {}
