@@ -239,12 +239,60 @@ def measure(root: Path, args) -> None:
         path.write_text(json.dumps(out, indent=1) + "\n")
 
 
+#: Fusion variants shown beside the default on the report side (issue 29): the default before (the mean rule, screen
+#: 0.5), the protocol's pick without the guard, and the new rules at the screens the guarded protocol tied.
+REPORT_VARIANTS = {"default before (mean, screen 0.5)": ("mean", 0.5), "mean, screen 0.9": ("mean", 0.9),
+                   "consensus, screen 0.65": ("consensus", 0.65), "iterative, screen 0.65": ("iterative", 0.65),
+                   "iterative, screen 0.8": ("iterative", 0.8)}
+
+
+def report(dbs: list[str], json_path: str | None) -> None:
+    """Every part, topomatch-equal, the default and :data:`REPORT_VARIANTS` on each index (NN / mAP, micro), and the
+    default's best part; written once, after the default was chosen."""
+    from dataclasses import replace
+
+    from retrieval_selection import load, nn_map
+
+    from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, get_method
+    from topomatch.stages.retrieval.fusion import decide, fused_matrix
+
+    base = get_method(DEFAULT_METHOD).fusion
+    equal = get_method("topomatch-equal").fusion
+    out = {"default": repr(base), "collections": {}}
+    for db in dbs:
+        mats, labels = load(db)
+        parts = [mats[p] for p in base.parts]
+        rows = {p: nn_map(mats[p], labels) for p in base.parts}
+        rows["topomatch-equal"] = nn_map(fused_matrix(parts, equal), labels)
+        decision = decide(parts, base)
+        rows["topomatch (default)"] = nn_map(fused_matrix(parts, base, decision), labels)
+        kept = {"topomatch (default)": list(decision.kept)}
+        for name, (rule, screen) in REPORT_VARIANTS.items():
+            fusion = replace(base, agreement_rule=rule, screen=screen)
+            d = decide(parts, fusion)
+            rows[name] = nn_map(fused_matrix(parts, fusion, d), labels)
+            kept[name] = list(d.kept)
+        best_nn = max(base.parts, key=lambda p: rows[p][0])
+        best_map = max(base.parts, key=lambda p: rows[p][1])
+        name = Path(db).name.removesuffix(".db")
+        out["collections"][name] = {"n": int(len(labels)), "methods": {m: [round(x, 4) for x in r] for m, r in rows.items()},
+                                    "kept": kept, "best_part": {"nn": [best_nn, rows[best_nn][0]],
+                                                                "map": [best_map, rows[best_map][1]]}}
+        print(f"\n{name} ({len(labels)}): best part NN {best_nn} {rows[best_nn][0]:.3f}, mAP {best_map} "
+              f"{rows[best_map][1]:.3f}")
+        for m, (nn, ap) in rows.items():
+            print(f"  {m:36s} {nn:.3f} / {ap:.3f}" + (f"  kept {kept[m]}" if m in kept else ""))
+    if json_path:
+        Path(json_path).write_text(json.dumps(out, indent=1) + "\n")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("command", choices=["extract", "build", "measure"])
+    ap.add_argument("command", choices=["extract", "build", "measure", "report"])
     ap.add_argument("--root", help="folder of the sources and collections (default $TOPOMATCH_POSES or /tmp/poses)")
     ap.add_argument("--mirrors", type=Path, default=Path("/work/.mirror"), help="extract: the bare git snapshots")
-    ap.add_argument("--json", help="measure: write the results here")
+    ap.add_argument("--json", help="measure, report: write the results here")
+    ap.add_argument("--dbs", nargs="*", default=[], help="report: indexes of the default method (labelled)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--only", nargs="*", help="measure: only these collections (poses_tune, poses_report)")
     ap.add_argument("--thesis", action="store_true", help="measure: also the thesis's skeleton methods (rgpd, srg)")
@@ -257,6 +305,8 @@ def main() -> None:
             print(f"{root / 'sources'}: no pose sources (academic-use data, not bundled); run extract first -- skipped")
             return
         print(build(root / "sources", root))
+    elif args.command == "report":
+        report(args.dbs, args.json)
     else:
         measure(root, args)
 
