@@ -7,7 +7,11 @@ Usage::
     # 2. the two collections, by the fixed rule below
     .venv/bin/python benchmarks/retrieval_poses.py build                                # -> $TOPOMATCH_POSES/poses_{tune,report}
     # 3. index them (every part of the default) and measure every part, the default and the agreement rules
-    .venv/bin/python benchmarks/retrieval_poses.py measure --json benchmarks/results/retrieval_poses.json
+    .venv/bin/python benchmarks/retrieval_poses.py measure --only poses_tune --json benchmarks/results/retrieval_poses.json
+    # 4. after the default was chosen (docs/retrieval.md, "Real poses and the agreement rule"), the report side once
+    .venv/bin/python benchmarks/retrieval_poses.py measure --only poses_report --json benchmarks/results/retrieval_poses.json
+    .venv/bin/python benchmarks/retrieval_poses.py report --dbs WT.db $TOPOMATCH_POSES/poses_report.db ... \
+        --json benchmarks/results/retrieval_poses_report.json
 
 The folder is ``--root``, else ``$TOPOMATCH_POSES``, else ``/tmp/poses``. Nothing is downloaded by the script and
 nothing of it belongs in the repository: when the sources or collections are absent, ``build`` and ``measure`` say

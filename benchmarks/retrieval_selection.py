@@ -31,6 +31,11 @@ is smaller ("never worse than its best part"; mAP alone until 2026-12-01), then 
 decides among them. The grid is evaluated on the choice side only; the report collections for the chosen
 settings. The chosen settings and every method's
 NN / mAP on every report collection are printed (markdown) and written as JSON.
+
+``--grid rules`` (issue 29, 2026-12-03) replaces the grid by the agreement rules (Fusion.agreement_rule: mean,
+consensus, iterative) x screens, the other settings at the default's; ``--guard G`` admits only settings that lose at
+most G mAP against the default of the time on every undegraded choice-side collection (added after the rules grid's
+tune-side numbers were read, before any report number); ``--choose-only`` stops after the choice.
 """
 
 from __future__ import annotations
