@@ -18,7 +18,7 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
   (not a fusion part);
 - ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
 - ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (a part dropped when its agreement
-  with the others is below 0.7 of the best part's, each kept part scaled by its median, a pair's two
+  with the others is below 0.5 of the best part's, each kept part scaled by its median, a pair's two
   smallest scaled dissimilarities averaged, re-ranked by manifold ranking, k from the collection's size, alpha = 0.95,
   with the cosine of the items' diffusion states);
   ``topomatch-equal``: the first fusion (equal weights, k = 10), kept for comparison.
@@ -139,10 +139,10 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            "farthest-point samples over the largest (Smeets 2012), on the cleaned, capped full mesh", "vector",
            SDGDM_MESH_CHAIN + ("sdgdm",), distance=sdgdm.distance_matrix),
     Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: a part whose nearest neighbours agree "
-           "with the others' less than 0.7 of the best part's is dropped, each kept part scaled by its median, a "
+           "with the others' less than 0.5 of the best part's is dropped, each kept part scaled by its median, a "
            "pair's two smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size, "
            "alpha = 0.95, the cosine of the items' diffusion states)",
-           "fusion", fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.95, order_weights=(1, 1), screen=0.7,
+           "fusion", fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.95, order_weights=(1, 1), screen=0.5,
                                    agreement_power=0.0, rerank_normalisation=0.5, agreement_rule="mean")),
     Method("topomatch-equal", "the first fusion (kept for comparison): agd, hks, shapedna, d2 and sh with equal "
            "weights, manifold ranking with k = 10", "fusion",
