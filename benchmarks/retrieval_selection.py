@@ -31,6 +31,11 @@ is smaller ("never worse than its best part"; mAP alone until 2026-12-01), then 
 decides among them. The grid is evaluated on the choice side only; the report collections for the chosen
 settings. The chosen settings and every method's
 NN / mAP on every report collection are printed (markdown) and written as JSON.
+
+``--grid rules`` (issue 29, 2026-12-03) replaces the grid by the agreement rules (Fusion.agreement_rule: mean,
+consensus, iterative) x screens, the other settings at the default's; ``--guard G`` admits only settings that lose at
+most G mAP against the default of the time on every undegraded choice-side collection (added after the rules grid's
+tune-side numbers were read, before any report number); ``--choose-only`` stops after the choice.
 """
 
 from __future__ import annotations
@@ -45,7 +50,7 @@ import numpy as np
 
 from topomatch.retrieval import open_index
 from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, get_method
-from topomatch.stages.retrieval.fusion import agreement, decide, fused_matrix
+from topomatch.stages.retrieval.fusion import AGREEMENT_RULES, agreement, consensus_agreement, decide, fused_matrix
 from topomatch.stages.retrieval.metrics import retrieval_metrics
 
 ORDER_WEIGHTS = {"equal": None, "1,1,.5,.25,.1": (1, 1, 0.5, 0.25, 0.1), "1,1,.5,.25": (1, 1, 0.5, 0.25),
@@ -64,6 +69,9 @@ ALPHA = {"0.9": 0.9, "0.95": 0.95, "0.99": 0.99}
 #: queries, and without a tie the afternoon run of 2026-12-02 traded 0.06 mAP on a Watertight half
 #: for a fraction of one query elsewhere. 0.005 is one query of a 200-shape collection.
 MARGIN_TIE = 0.005
+#: ``--grid rules`` (issue 29, 2026-12-03): what a part's agreement is measured against (Fusion.agreement_rule) and
+#: the screen, every other setting at the current default's; fixed before any number of it was read.
+RULE_SCREENS = {"none": None, "0.5": 0.5, "0.6": 0.6, "0.65": 0.65, "0.7": 0.7, "0.8": 0.8, "0.9": 0.9}
 #: Degraded copies: part -> fraction of the shapes permuted.
 DEGRADED = {"D2, SH scrambled": {"d2": 1.0, "sh": 1.0}, "hidden-like": {"d2": 0.5, "sh": 0.5, "agd": 0.25}}
 
@@ -108,6 +116,14 @@ def grid_settings(base):
                        rerank_alpha=alpha))
 
 
+def rule_settings(base):
+    """(name, Fusion) for ``--grid rules``: each agreement rule with each screen (no screen once), from ``base``."""
+    yield "screen none", replace(base, screen=None)
+    for rule, (s, screen) in itertools.product(AGREEMENT_RULES, RULE_SCREENS.items()):
+        if screen is not None:
+            yield f"agreement rule {rule}; screen {s}", replace(base, agreement_rule=rule, screen=screen)
+
+
 def nn_map(D, labels) -> tuple[float, float]:
     m = retrieval_metrics(D, labels).micro
     return float(m["nn"]), float(m["map"])
@@ -119,6 +135,15 @@ def main() -> None:
     ap.add_argument("--tune", nargs="*", default=[], help="indexes where settings may be chosen")
     ap.add_argument("--report", nargs="*", default=[], help="indexes only reported")
     ap.add_argument("--json", help="write the results here")
+    ap.add_argument("--grid", choices=["full", "rules"], default="full",
+                    help="full: the grid of the protocol (3,360 settings); rules: the agreement rules x screens, the "
+                         "other settings at the default's (issue 29)")
+    ap.add_argument("--guard", type=float,
+                    help="admit only settings that lose at most this much mAP against the current default on every "
+                         "undegraded collection of the choice side (issue 29, 2026-12-03: the worst-margin criterion "
+                         "otherwise buys a fraction of a query with 0.05-0.11 mAP on a Watertight half)")
+    ap.add_argument("--choose-only", action="store_true",
+                    help="stop after the choice: no report collection (Watertight's full set included) is evaluated")
     args = ap.parse_args()
 
     base = get_method(DEFAULT_METHOD).fusion
@@ -141,24 +166,41 @@ def main() -> None:
     best_nn = {n: max(nn for nn, _ in scores) for n, scores in part_scores.items()}
     best_part = {n: max(ap for _, ap in scores) for n, scores in part_scores.items()}
     part_lists = {n: [c[0][p] for p in base.parts] for n, c in colls.items()}
-    agreements = {n: agreement(mats) for n, mats in part_lists.items()}  # the same for every setting
+    # each rule's first agreement is the same for every setting (consensus and iterative start from the same one)
+    agreements = {n: {"mean": agreement(mats)} for n, mats in part_lists.items()}
+
+    def first_agreement(n, rule):
+        key = "mean" if rule == "mean" else "consensus"
+        if key not in agreements[n]:
+            agreements[n][key] = consensus_agreement(part_lists[n])
+        return agreements[n][key]
 
     def evaluate(fusion, names):
-        return {n: nn_map(fused_matrix(part_lists[n], fusion, decide(part_lists[n], fusion, agreements=agreements[n])),
-                          colls[n][1]) for n in names}
+        return {n: nn_map(fused_matrix(part_lists[n], fusion, decide(
+            part_lists[n], fusion, agreements=first_agreement(n, fusion.agreement_rule))), colls[n][1]) for n in names}
 
     # every setting on the collections where a choice may be made (both Watertight halves, their
     # hidden-like copies and the tune collections); the report collections only for the settings chosen
     choice_side = [n for n in colls if n.startswith("Watertight half")] + tune
-    grid = {name: (fusion, evaluate(fusion, choice_side)) for name, fusion in grid_settings(base)}
+    settings = grid_settings(base) if args.grid == "full" else rule_settings(base)
+    grid = {name: (fusion, evaluate(fusion, choice_side)) for name, fusion in settings}
 
     def margin(results, names):
         # the worst margin over the best part, in NN or mAP, whichever is smaller
         return min(min(results[n][0] - best_nn[n], results[n][1] - best_part[n]) for n in names)
 
+    current = evaluate(base, choice_side) if args.guard is not None else {}
+
+    def admissible(g, names):
+        # --guard: no real (undegraded) collection of the choice side loses more than the guard in mAP against the
+        # catalogue's default when the script runs
+        return args.guard is None or all(grid[g][1][n][1] >= current[n][1] - args.guard - 1e-9
+                                          for n in names if n in current and "(" not in n)
+
     def choose(names, among=None):
         # the best worst margin, up to MARGIN_TIE; among those, the best mean mAP (then the better margin)
         among = sorted(grid) if among is None else sorted(among)
+        among = [g for g in among if admissible(g, names)] or among
         top = max(margin(grid[g][1], names) for g in among)
         near = [g for g in among if margin(grid[g][1], names) >= top - MARGIN_TIE - 1e-9]  # one query is a tie
         return max(near, key=lambda g: (float(np.mean([grid[g][1][n][1] for n in names])), margin(grid[g][1], names)))
@@ -167,11 +209,13 @@ def main() -> None:
         return margin(results, names), float(np.mean([results[n][1] for n in names]))
 
     out = {"selections": {}, "collections": {n: len(c[1]) for n, c in colls.items()}}
+    if args.grid == "rules":  # small: every setting's results on the choice side, for the docs
+        out["grid"] = {g: {n: [round(x, 4) for x in r] for n, r in res.items()} for g, (_, res) in grid.items()}
     for side, chosen_on, reported_on in (("A", "Watertight half A", "Watertight half B"),
                                          ("B", "Watertight half B", "Watertight half A")):
         names = [chosen_on, f"{chosen_on} (hidden-like)"] + tune
         best = choose(names)
-        shown_here = [reported_on, f"{reported_on} (hidden-like)"] + report
+        shown_here = [] if args.choose_only else [reported_on, f"{reported_on} (hidden-like)"] + report
         out["selections"][side] = {"chosen_on": names, "setting": best, "criterion": criterion(grid[best][1], names),
                                    "reported": {**{n: grid[best][1][n] for n in shown_here if n in grid[best][1]},
                                                 **evaluate(grid[best][0], [n for n in shown_here
@@ -183,6 +227,12 @@ def main() -> None:
     candidates = {out["selections"][side]["setting"] for side in "AB"}
     out["default_rule"] = choose(pooled, among=candidates)
     print(f"default by the rule (agreement, else pooled over both tune sides): {out['default_rule']}")
+    if args.choose_only:  # the choice, and nothing of the report side
+        for side in "AB":
+            del out["selections"][side]["reported"]  # empty
+        if args.json:
+            Path(args.json).write_text(json.dumps(out, indent=1))
+        return
     shown = ["Watertight half A", "Watertight half B", "Watertight half A (hidden-like)",
              "Watertight half B (hidden-like)"] + report
     methods = {p: {n: nn_map(colls[n][0][p], colls[n][1]) for n in shown} for p in base.parts}

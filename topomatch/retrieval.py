@@ -611,6 +611,8 @@ class Collection:
             return {p: np.stack([descriptors[p][i].data.ravel() for i in idx]) for p in parts}
 
         settings = [m.fusion.screen, list(m.fusion.order_weights or ())]
+        if m.fusion.agreement_rule != "mean":  # (shortlists saved before the rule existed stay valid for 'mean')
+            settings.append(m.fusion.agreement_rule)
         with ShapeIndex(self.db, readonly=True) as store:
             generation = store.generation()
         if (ann is not None and not refresh and generation is not None and ann.sample.get("generation") == generation

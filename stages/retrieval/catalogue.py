@@ -143,7 +143,7 @@ METHODS: dict[str, Method] = {m.name: m for m in (
            "pair's two smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size, "
            "alpha = 0.95, the cosine of the items' diffusion states)",
            "fusion", fusion=Fusion(FUSION_PARTS, rerank_k="auto", rerank_alpha=0.95, order_weights=(1, 1), screen=0.5,
-                                   agreement_power=0.0, rerank_normalisation=0.5)),
+                                   agreement_power=0.0, rerank_normalisation=0.5, agreement_rule="mean")),
     Method("topomatch-equal", "the first fusion (kept for comparison): agd, hks, shapedna, d2 and sh with equal "
            "weights, manifold ranking with k = 10", "fusion",
            fusion=Fusion(FUSION_PARTS, rerank_k=10, rerank_alpha=0.9)),

@@ -13,7 +13,14 @@ Then, with no labels, from the collection itself:
    that see the same classes agree far above it (measured in docs/retrieval.md: 0.04-0.08 against
    0.19-0.47). Each kept part's scale is multiplied by (agreement / best)^agreement_power, so a
    part that agrees less looks farther and drops out of the smallest values of step 2; ``screen``
-   drops parts below that fraction of the best agreement outright.
+   drops parts below that fraction of the best agreement outright. ``agreement_rule`` says what a part's
+   agreement is compared with (issue 29): ``'mean'`` (the first rule) averages its overlap with every other
+   part, so two parts that see the same wrong thing (D2 and spherical harmonics, both extrinsic, on real
+   poses) raise each other's agreement and pass the screen; ``'consensus'`` compares the part with the
+   *consensus* of the others (the plain sum of their median-scaled dissimilarities, the part itself left
+   out), where a minority that sees the same wrong thing weighs only its share; ``'iterative'`` repeats
+   that against the consensus of the parts kept so far, dropping parts below the screen, until the kept
+   set no longer changes, so a part dropped no longer props up its partner.
 2. **Order-weighted averaging** (``order_weights``; R. R. Yager, IEEE SMC 1988): for each pair of
    shapes the parts' scaled dissimilarities are sorted, smallest first, and averaged with
    decreasing weights, so a pair that two parts find close is close even when a third finds it
@@ -49,6 +56,10 @@ import numpy as np
 #: Neighbours compared by the screening's agreement.
 AGREEMENT_NEIGHBOURS = 5
 
+#: What a part's agreement is measured against (:attr:`Fusion.agreement_rule`; module docstring, step 1).
+AgreementRule = Literal["mean", "consensus", "iterative"]
+AGREEMENT_RULES: tuple[str, ...] = ("mean", "consensus", "iterative")
+
 
 @dataclass(frozen=True)
 class Fusion:
@@ -74,6 +85,11 @@ class Fusion:
     rerank_normalisation : float
         beta >= 0: manifold-ranking scores divided by the items' self-scores to that power (module
         docstring, step 3); 0 = Zhou et al.'s scores as they are.
+    agreement_rule : {'mean', 'consensus', 'iterative'}
+        What a part's agreement is measured against (module docstring, step 1): its mean overlap with every
+        other part ('mean', the first rule), its overlap with the consensus of the other parts
+        ('consensus'), or with the consensus of the parts kept so far, screened again until the kept set is
+        stable ('iterative').
     """
 
     parts: tuple[str, ...]
@@ -83,6 +99,12 @@ class Fusion:
     screen: float | None = None
     agreement_power: float = 0.0
     rerank_normalisation: float = 0.0
+    agreement_rule: AgreementRule = "mean"
+
+    def __post_init__(self):
+        if self.agreement_rule not in AGREEMENT_RULES:
+            raise ValueError(f"Fusion.agreement_rule: expected one of {', '.join(AGREEMENT_RULES)}, "
+                             f"got {self.agreement_rule!r}")
 
     def with_parts(self, parts, rerank_k=...) -> "Fusion":
         """The same fusion over other parts (and optionally another ``rerank_k``)."""
@@ -155,6 +177,13 @@ def _neighbour_sets(D: np.ndarray, k: int) -> np.ndarray:
     return np.argpartition(D, k - 1, axis=1)[:, :k]
 
 
+def _overlap(a: np.ndarray, b: np.ndarray) -> float:
+    """Mean fraction of common neighbours of two (n, k) neighbour sets, row by row."""
+    n, k = a.shape
+    # (n, k, k) comparisons of k distinct indices each
+    return (a[:, :, None] == b[:, None, :]).sum() / (n * k)
+
+
 def agreement(part_matrices: list[np.ndarray], k: int = AGREEMENT_NEIGHBOURS) -> np.ndarray:
     """(P,) mean overlap of each part's k-nearest-neighbour sets with every other part's, in [0, 1]."""
     n = len(part_matrices[0])
@@ -162,9 +191,57 @@ def agreement(part_matrices: list[np.ndarray], k: int = AGREEMENT_NEIGHBOURS) ->
         return np.ones(len(part_matrices))
     k = min(k, n - 1)
     sets = [_neighbour_sets(P, k) for P in part_matrices]
-    # common neighbours of two parts, row by row: (n, k, k) comparisons of k distinct indices each
-    pair = np.array([[(a[:, :, None] == b[:, None, :]).sum() / (n * k) for b in sets] for a in sets])
+    pair = np.array([[_overlap(a, b) for b in sets] for a in sets])
     return (pair.sum(axis=1) - np.diag(pair)) / (len(sets) - 1)
+
+
+def _consensus(part_matrices: list[np.ndarray], members) -> np.ndarray:
+    """The plain sum of the median-scaled matrices of the parts ``members`` (non-finite entries: infinitely far)."""
+    total = sum(np.asarray(part_matrices[i], dtype=np.float64) / median_scale(part_matrices[i]) for i in members)
+    return np.where(np.isfinite(total), total, np.inf)
+
+
+def consensus_agreement(part_matrices: list[np.ndarray], kept=None, k: int = AGREEMENT_NEIGHBOURS) -> np.ndarray:
+    """(P,) overlap of each part's k-nearest-neighbour sets with those of the consensus of the parts ``kept``
+    (indices; default all) other than itself, in [0, 1] (:func:`_consensus`; 1 for a part with no other part kept)."""
+    P, n = len(part_matrices), len(part_matrices[0])
+    kept = list(range(P)) if kept is None else list(kept)
+    if P < 2 or n < 3:
+        return np.ones(P)
+    k = min(k, n - 1)
+    sets = [_neighbour_sets(M, k) for M in part_matrices]
+    out = np.ones(P)
+    for p in range(P):
+        others = [q for q in kept if q != p]
+        if others:
+            out[p] = _overlap(sets[p], _neighbour_sets(_consensus(part_matrices, others), k))
+    return out
+
+
+def screened(part_matrices: list[np.ndarray], rule: str, screen: float | None,
+             agreements: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """((P,) agreement, (P,) bool kept) of the parts by ``rule`` (:attr:`Fusion.agreement_rule`): a part is kept
+    when its agreement is at least ``screen`` times the best part's (every part when ``screen`` is None).
+    ``agreements``: the rule's first agreement when already computed (for 'mean', :func:`agreement`; for the
+    others, :func:`consensus_agreement` of every part)."""
+    P = len(part_matrices)
+    if rule == "mean":
+        a = agreement(part_matrices) if agreements is None else np.asarray(agreements)
+    else:
+        a = consensus_agreement(part_matrices) if agreements is None else np.asarray(agreements)
+    keep = a >= (screen or 0.0) * a.max()
+    if rule != "iterative" or not screen:
+        return a, keep
+    seen = {tuple(keep)}
+    for _ in range(2 * P):  # the kept set shrinks or settles within a few rounds; a cycle stops at its first repeat
+        a = consensus_agreement(part_matrices, np.flatnonzero(keep))
+        new = a >= screen * a.max()
+        if tuple(new) == tuple(keep) or tuple(new) in seen:
+            keep = new
+            break
+        seen.add(tuple(new))
+        keep = new
+    return a, keep
 
 
 def rerank_neighbours(fusion: Fusion, n: int) -> int | None:
@@ -177,13 +254,13 @@ def rerank_neighbours(fusion: Fusion, n: int) -> int | None:
 def decide(part_matrices: list[np.ndarray], fusion: Fusion, graph_size: int | None = None,
            agreements: np.ndarray | None = None) -> FusionDecision:
     """Screen the parts of ``fusion`` on a database's (n, n) part matrices (module docstring, step 1).
-    ``agreements``: :func:`agreement` of these matrices when already computed (it depends on them only, so
-    many fusions of one collection can share it)."""
+    ``agreements``: the first agreement of ``fusion.agreement_rule`` on these matrices when already computed
+    (:func:`agreement` for 'mean', :func:`consensus_agreement` otherwise; it depends on them only, so many fusions of
+    one collection can share it)."""
     n = graph_size if graph_size is not None else len(part_matrices[0])
     if fusion.screen is None and not fusion.agreement_power:
         return FusionDecision(fusion.parts, (), {}, rerank_neighbours(fusion, n))
-    a = agreement(part_matrices) if agreements is None else np.asarray(agreements)
-    keep = a >= (fusion.screen or 0.0) * a.max()
+    a, keep = screened(part_matrices, fusion.agreement_rule, fusion.screen, agreements)
     return FusionDecision(tuple(p for p, k in zip(fusion.parts, keep) if k),
                           tuple(p for p, k in zip(fusion.parts, keep) if not k),
                           {p: float(x) for p, x in zip(fusion.parts, a)}, rerank_neighbours(fusion, n))

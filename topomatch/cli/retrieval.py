@@ -277,7 +277,9 @@ def fusion_line(decision: dict, method: str) -> str:
 
     fusion = get_method(method).fusion
     agreement = ", ".join(f"{p} {a:.2f}" for p, a in decision["agreement"].items()) or "not measured"
-    dropped = (f"; dropped {', '.join(decision['dropped'])} (agreement below {fusion.screen:g} x the best)"
+    against = {"mean": "", "consensus": " with the others' consensus",
+               "iterative": " with the kept parts' consensus"}[fusion.agreement_rule]
+    dropped = (f"; dropped {', '.join(decision['dropped'])} (agreement{against} below {fusion.screen:g} x the best)"
                if decision["dropped"] else "")
     weights = ""
     if fusion.agreement_power and decision["agreement"]:

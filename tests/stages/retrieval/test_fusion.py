@@ -310,3 +310,98 @@ def _check_duplicates(fusion, D):
     D5 = np.zeros((4, 4))
     d = fused_query([np.full(4, 2.0), np.full(4, 3.0)], [D5, D5], fusion)
     assert np.isfinite(d).all() and np.ptp(d) <= 1e-12  # tied up to the round-off of the inverse
+
+
+# --- agreement rules (issue 29) ---------------------------------------------------------------------------------
+
+
+def _agreement_before_issue_29(part_matrices, k=5):
+    """The screening's agreement as it was before ``Fusion.agreement_rule`` existed (copied from the git history)."""
+    n = len(part_matrices[0])
+    if len(part_matrices) < 2 or n < 3:
+        return np.ones(len(part_matrices))
+    k = min(k, n - 1)
+    sets = []
+    for P in part_matrices:
+        D = np.array(P, dtype=np.float64)
+        D[~np.isfinite(D)] = np.inf
+        np.fill_diagonal(D, np.inf)
+        sets.append(np.argpartition(D, k - 1, axis=1)[:, :k])
+    pair = np.array([[(a[:, :, None] == b[:, None, :]).sum() / (n * k) for b in sets] for a in sets])
+    return (pair.sum(axis=1) - np.diag(pair)) / (len(sets) - 1)
+
+
+def _camps(seed=0):
+    """Three informative parts (one class structure, each with its own noise) and a *camp* of two parts that agree
+    with each other almost perfectly and carry no class information (both measure one random embedding): the
+    shape of D2 and spherical harmonics on real poses, which agree with each other and not with the classes."""
+    rng = np.random.default_rng(seed)
+    y = np.repeat(np.arange(8), 10)
+    X = (rng.normal(size=(8, 6)) * 3)[y] + rng.normal(size=(len(y), 6))
+    sym = lambda D: (D + D.T) / 2  # noqa: E731
+    good = [sym(cdist(X + 0.5 * rng.normal(size=X.shape), X)) for _ in range(3)]
+    Z = rng.normal(size=(len(y), 3))
+    camp = [sym(cdist(Z + 0.02 * rng.normal(size=Z.shape), Z)) for _ in range(2)]
+    return good, camp, y
+
+
+def _map(D, y):
+    from topomatch.stages.retrieval.metrics import retrieval_metrics
+
+    return retrieval_metrics(D, y).micro["map"]
+
+
+def test_the_mean_rule_is_the_screening_of_before_bit_for_bit():
+    from topomatch.stages.retrieval.fusion import FusionDecision, agreement, decide, rerank_neighbours
+
+    good, camp, _ = _camps(seed=2)
+    mats = good + camp
+    for m in (mats, mats[:2], [good[0], np.where(good[1] > np.median(good[1]), np.inf, good[1])]):
+        assert np.array_equal(agreement(m), _agreement_before_issue_29(m))
+    default = get_method("topomatch").fusion
+    for fusion in (replace(default, agreement_rule="mean"), replace(default, agreement_rule="mean", screen=0.65)):
+        a = _agreement_before_issue_29(mats)
+        keep = a >= fusion.screen * a.max()
+        before = FusionDecision(tuple(p for p, k in zip(fusion.parts, keep) if k),
+                                tuple(p for p, k in zip(fusion.parts, keep) if not k),
+                                {p: float(x) for p, x in zip(fusion.parts, a)}, rerank_neighbours(fusion, len(mats[0])))
+        assert decide(mats, fusion) == before
+        assert np.array_equal(fused_matrix(mats, fusion), fused_matrix(mats, fusion, before))
+    # the catalogue's methods keep a valid rule, and an unknown one is refused
+    assert default.agreement_rule in ("mean", "consensus", "iterative")
+    with pytest.raises(ValueError, match="agreement_rule"):
+        replace(default, agreement_rule="median")
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_iterative_rule_drops_a_camp_without_class_information_that_the_mean_rule_keeps(seed):
+    from topomatch.stages.retrieval.fusion import agreement, decide
+
+    good, camp, y = _camps(seed)
+    mats = good + camp
+    parts = ("agd", "hks", "shapedna", "d2", "sh")
+    fusion = Fusion(parts, "auto", 0.95, order_weights=(1, 1), screen=0.5, rerank_normalisation=0.5)
+    # the failure of issue 29: each part of the camp agrees with its partner, so its mean agreement passes the screen
+    a = agreement(mats)
+    assert a[3:].min() >= 0.5 * a.max()
+    assert decide(mats, fusion).dropped == ()
+    iterative = replace(fusion, agreement_rule="iterative")
+    decision = decide(mats, iterative)
+    assert decision.kept == parts[:3] and decision.dropped == parts[3:]  # weight 0: not in the fusion at all
+    # the fused ranking is then exactly that of the informative parts alone
+    alone = fused_matrix(good, replace(fusion, parts=parts[:3], screen=None))
+    fused = fused_matrix(mats, iterative)
+    assert np.array_equal(fused, alone)
+    assert _map(fused, y) == _map(alone, y) > _map(fused_matrix(mats, fusion), y)
+
+
+def test_rules_keep_every_part_when_all_of_them_see_the_classes_and_a_lone_junk_part_goes_by_every_rule():
+    from topomatch.stages.retrieval.fusion import decide
+
+    X, _ = _clusters()
+    informative = [cdist(X, X), cdist(X, X, "cityblock"), cdist(X, X, "chebyshev")]
+    lone = informative + [_scrambled(informative[0], 5)]
+    for rule in ("mean", "consensus", "iterative"):
+        fusion = Fusion(("a", "b", "c"), "auto", 0.95, order_weights=(1, 1), screen=0.5, agreement_rule=rule)
+        assert decide(informative, fusion).dropped == ()
+        assert decide(lone, fusion.with_parts("abcd")).dropped == ("d",)
