@@ -38,6 +38,12 @@ class MetricSpec(_Named):
                                                                              "Tsallis relative entropy")
     min_overlap: float = Field(0.25, gt=0, le=1, description="smallest accepted fraction of fixed samples inside the "
                                                               "moving image (below it the measure is undefined)")
+    outline_alpha: float | None = Field(1.0, gt=0, le=10, allow_inf_nan=False,
+                                        description="entropy order of jt, jr, tmi on an outline-only pair (either "
+                                                    "image with less interior structure than check.min_structure: a "
+                                                    "silhouette, a mask): order 1, where all three are mutual "
+                                                    "information, keeps the outline on the object's edge; order 2 "
+                                                    "pulls it onto the largest bins' band (null: alpha)")
 
     def label(self) -> str:
         """``jt(alpha=2 histogram)``, ``tmi(alpha=2)``, ``mi``."""
@@ -46,6 +52,12 @@ class MetricSpec(_Named):
         if self.name == "tmi":
             return f"{self.name}(alpha={self.alpha:g})"
         return self.name
+
+    def for_outline(self) -> "MetricSpec":
+        """The measure of an outline-only pair: ``alpha`` replaced by ``outline_alpha`` (jt, jr, tmi)."""
+        if self.outline_alpha is None or self.name == "mi":
+            return self
+        return self.model_copy(update={"alpha": self.outline_alpha})
 
 
 class OptimizerSpec(_Named):
@@ -89,6 +101,9 @@ class LevelSpec(Params):
                           description="run the level again from its end while the last half of its iterations moved "
                                       "the estimate by more than this (RMS displacement; 0: never)")
     reruns: int = Field(0, ge=0, le=10, description="at most this many runs again (see settle)")
+    smoothing: float = Field(0.0, ge=0, allow_inf_nan=False,
+                             description="Gaussian sigma, in the level's pixels, applied to both images after the "
+                                         "block average (0: none)")
 
 
 class TransformSpec(Params):
@@ -143,15 +158,17 @@ class CheckSpec(Params):
                                description="flag a result that maps less than this fraction of the fixed image's "
                                            "content (Otsu foreground) onto the moving image's content")
     min_structure: float = Field(0.06, ge=0, allow_inf_nan=False,
-                                 description="flag a pair in which either image has less structure inside its "
-                                             "outline than this (interior over outline gradient, structure.py): a "
-                                             "mask or silhouette, whose outline alone fixes the transform only as "
-                                             "well as the two outlines correspond (0: off)")
-    outline_gap: float = Field(1.25, ge=0, allow_inf_nan=False,
+                                 description="a pair in which either image has less structure inside its outline "
+                                             "than this (interior over outline gradient, structure.py) is "
+                                             "outline-only (a mask, a silhouette): registered with "
+                                             "metric.outline_alpha and outline_smoothing, and flagged by "
+                                             "outline_gap and outline_drop (0: no pair is)")
+    outline_gap: float = Field(6.0, ge=0, allow_inf_nan=False,
                                description="such a pair is flagged when the two outlines lie farther apart than this "
-                                           "(physical units, mean) at the result: the answer is as uncertain as "
-                                           "the gap (a dilated or differently thresholded mask); 0 flags every "
-                                           "such pair")
+                                           "(physical units, mean, compared within 4 fixed pixels of the fixed "
+                                           "outline) at the result: outlines that do not correspond at all "
+                                           "(the validation corpus's correct outline-only results: at most 5.4); "
+                                           "0 flags every such pair")
     outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
                                 description="such a pair is flagged when a coarser level's measure is lower at the "
                                             "result than at its own end by more than this fraction (the "
@@ -204,6 +221,11 @@ class RegisterParams(Params):
     check: CheckSpec = Field(default_factory=CheckSpec, description="self-check: search, probes, thresholds, retry, "
                                                                    "on_failure")
     seed: int = Field(0, ge=0, description="seed of the SPSA perturbations and of the sample subsets")
+    outline_smoothing: float = Field(1.0, ge=0, allow_inf_nan=False,
+                                     description="on an outline-only pair (metric.outline_alpha), the finest level's "
+                                                 "images are smoothed by a Gaussian of this many of its pixels: the "
+                                                 "outline's step becomes a ramp that the histogram sees at sub-pixel "
+                                                 "shifts (0: the level's own smoothing)")
     coarse_overlap_power: float = Field(0.0, ge=0, le=4, allow_inf_nan=False,
                                         description="every level but the finest multiplies its measure by the "
                                                     "overlap fraction to this power: a sliver of overlap cannot "

@@ -20,7 +20,7 @@ import numpy as np
 
 from topomatch.pipeline.contract import StageError, StageResult, stage
 from topomatch.stages.registration.histogram import Binning, JointHistogram
-from topomatch.stages.registration.image import Image, foreground_mask, grow, rms_radius
+from topomatch.stages.registration.image import Image, foreground_mask, gaussian_blur, grow, rms_radius
 from topomatch.stages.registration.objective import Objective
 from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_dimension
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
@@ -167,6 +167,9 @@ class _Run:
         self.k = n_angles(fixed.dim)
         self.center = fixed.center
         self.mask = mask
+        self.structures = self._structures()
+        self.outline_only = any(v < params.check.min_structure for v in self.structures.values())
+        self.metric = params.metric.for_outline() if self.outline_only else params.metric
         self.levels = self._pyramid()
         self.radius = rms_radius(fixed, mask)
         self.scales = np.r_[[1.0 / self.radius] * self.k, [1.0] * self.dim]
@@ -182,17 +185,34 @@ class _Run:
         self.ends: list[np.ndarray] = []
         self._grid: GridSearch | None = None
 
+    def _structures(self) -> dict[str, float]:
+        """``structure_fixed`` / ``structure_moving``: each image's :func:`~.structure.interior_structure` (left
+        out when NaN: no interior or no outline to judge; none when ``check.min_structure`` is 0). Either below
+        ``check.min_structure`` makes the pair outline-only: a mask or silhouette, whose outline is all the
+        measure can align (``metric.outline_alpha``, ``outline_smoothing``, :func:`check_outline`)."""
+        if self.params.check.min_structure <= 0:
+            return {}
+        values = {f"structure_{role}": interior_structure(image) for role, image in (("fixed", self.fixed),
+                                                                                   ("moving", self.moving))}
+        return {k: v for k, v in values.items() if math.isfinite(v)}
+
     def _pyramid(self) -> list[_Level]:
-        """One measure per schedule level, coarse to fine (module docstring, point 2)."""
-        p, m = self.params, self.params.metric
+        """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images
+        smoothed by its ``smoothing`` in its own pixels (the finest by ``outline_smoothing`` on an outline-only
+        pair)."""
+        p, m = self.params, self.metric
         mask_image = None if self.mask is None else self.fixed.with_data(self.mask.astype(np.float64))
+        last = len(p.schedule) - 1
 
         def build(i: int, spec: LevelSpec, grid: LevelSpec, sigma: float) -> _Level:
             F, M = (self.fixed.smoothed(sigma), self.moving.smoothed(sigma)) if sigma > 0 else (self.fixed, self.moving)
             F, M = F.shrink_to(grid.spacing, MIN_LEVEL_VOXELS), M.shrink_to(grid.spacing, MIN_LEVEL_VOXELS)
+            blur = p.outline_smoothing if i == last and self.outline_only and p.outline_smoothing > 0 else spec.smoothing
+            if blur > 0:
+                F, M = (X.with_data(gaussian_blur(X.data, [blur] * X.dim)) for X in (F, M))
             mask = None if mask_image is None else mask_image.shrink_to(grid.spacing, MIN_LEVEL_VOXELS).data >= 0.5
             mask = mask if mask is not None and mask.any() else None
-            power = p.coarse_overlap_power if i < len(p.schedule) - 1 else 0.0
+            power = p.coarse_overlap_power if i < last else 0.0
             objective = Objective(self.histogram(spec, (F, M, mask), grid.samples, p.seed + i), m.name, alpha=m.alpha,
                                   weights=m.weights, tmi_form=m.tmi_form, min_overlap=m.min_overlap,
                                   overlap_power=power)
@@ -444,7 +464,7 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     Jensen-Tsallis (alpha 2, histogram weights) on the same samples, and ends more than ``check.agreement`` away
     (a measure with a biased optimum: Tsallis MI on multimodal pairs). Nothing to compare for JT itself."""
     m, limit = run.params.metric, run.params.check.agreement
-    if limit <= 0 or (m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"):
+    if limit <= 0 or (m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram") or run.outline_only:
         return []
     finest = run.levels[-1]
     jt = Objective(finest.objective.histogram, "jt", alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
@@ -513,35 +533,29 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
-    """Either image's only structure is its outline (a mask, a silhouette) and that outline does not pin the result
-    down: the two outlines lie more than ``check.outline_gap`` apart at the result (a dilated or differently
-    thresholded mask: the answer is as uncertain as the gap), or the finer levels left the optimum a coarser level
-    found (the consistency measure above ``check.outline_drop``). Such a pair passing both is accepted."""
+    """The pair is outline-only (``run.outline_only``: a mask, a silhouette) and its outline does not pin the result
+    down: the two outlines lie more than ``check.outline_gap`` apart at the result (they do not correspond there),
+    or the finer levels left the optimum a coarser level found (the consistency measure above
+    ``check.outline_drop``). Such a pair passing both is accepted."""
     c = run.params.check
-    if c.min_structure <= 0:
+    if not run.outline_only:
         return []
-    flat = []
-    for role, image in (("fixed", run.fixed), ("moving", run.moving)):
-        structure = interior_structure(image)  # NaN: no interior or no outline to compare (not flagged)
-        if math.isfinite(structure):
-            run.measures[f"structure_{role}"] = structure
-        if structure < c.min_structure:
-            flat.append(f"the {role} image has almost no structure inside its outline (interior gradient "
-                        f"{structure:.3f} of the outline's; min_structure {c.min_structure:g})")
-    if not flat:
-        return []
+    flat = [f"the {role} image has almost no structure inside its outline (interior gradient {structure:.3f} of "
+            f"the outline's; min_structure {c.min_structure:g})"
+            for role in ("fixed", "moving") if (structure := run.structures.get(f"structure_{role}", math.nan))
+            < c.min_structure]
     gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, RigidTransform(tuple(theta),
                                                                                           tuple(run.center)))
     drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
-    why = ([f"the outlines lie {gap:.2f} units apart at the result (outline_gap {c.outline_gap:g}): the answer is "
-            f"as uncertain as that" if math.isfinite(gap) else "the outlines cannot be compared at the result"]
+    why = ([f"the outlines lie {gap:.2f} units apart at the result (outline_gap {c.outline_gap:g}): they do not "
+            f"correspond there" if math.isfinite(gap) else "the outlines cannot be compared at the result"]
            if not gap <= c.outline_gap else []) + \
           ([f"the finest level left the optimum a coarser level found (its measure {drop:.1%} lower there; "
             f"outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else [])
     if not why:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "
-                            f"or set check.min_structure 0 to accept such pairs")]
+                            f"or set check.min_structure 0 to register it as an ordinary pair")]
 
 
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
@@ -633,7 +647,9 @@ def describe(t: RigidTransform) -> str:
 
 def self_check(run: _Run, theta: np.ndarray, value: float, stop: str) -> list[Flag]:
     """The flags of every test of :data:`CHECKS` at the result; ``run.better`` is the capture test's better end."""
-    run.better, run.measures = None, {}
+    run.better, run.measures = None, dict(run.structures)
+    if run.outline_only and run.metric.alpha != run.params.metric.alpha:
+        run.measures["outline_alpha"] = run.metric.alpha
     flags: list[Flag] = []
     for check in CHECKS:
         flags += check(run, theta, value, stop)

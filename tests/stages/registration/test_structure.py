@@ -82,3 +82,58 @@ def test_a_silhouette_pair_is_flagged_when_its_levels_disagree_and_the_check_can
     assert ("outline" in {f.check for f in default.flags}) == (drop > c.outline_drop or gap > c.outline_gap)
     off = register(pd_slice, moving, RegisterParams.model_validate({"check": {"min_structure": 0}}))
     assert "outline" not in {f.check for f in off.flags}
+
+
+def _silhouette(image: Image) -> Image:
+    """The object of ``image`` (its content closed, holes filled) as a uniform 100 on 0: a label map's outline."""
+    from topomatch.stages.registration.structure import object_mask
+
+    return image.with_data(np.where(object_mask(image), 100.0, 0.0), name="silhouette")
+
+
+@pytest.mark.parametrize("metric", ["jt", "jr", "tmi"])
+def test_an_outline_only_pair_is_registered_at_order_one_where_jt_jr_tmi_are_one_measure(pd_slice, metric):
+    """PD slice against its own silhouette moved by a known T: the pair is outline-only, so the measure's order
+    becomes ``metric.outline_alpha`` (1: JT with histogram weights, JR and TMI are all mutual information
+    there, the same numbers to rounding) and the finest level is smoothed: T recovered to half a pixel (mean over
+    every pixel), the order recorded, JT's agreement test not asked."""
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform, target_registration_error
+
+    truth = RigidTransform.euler2d(6.0, -4.0, 5.0, pd_slice.center)
+    moving = moved(_silhouette(pd_slice), truth)
+    reg = register(pd_slice, moving, RegisterParams.model_validate({"metric": metric}))
+    assert reg.measures["structure_moving"] < RegisterParams().check.min_structure
+    assert reg.measures["outline_alpha"] == 1.0 and "agreement" not in reg.measures
+    assert target_registration_error(reg.transform, truth, pd_slice.points()).mean() < 0.5
+    if metric != "jt":
+        jt = register(pd_slice, moving, RegisterParams.model_validate({"metric": "jt"}))
+        np.testing.assert_allclose(reg.transform.parameters, jt.transform.parameters, atol=1e-8)
+
+
+def test_an_ordinary_pair_ignores_the_outline_settings_and_level_smoothing_blurs_the_level(pd_slice):
+    """T1 against PD has structure inside: the outline settings change nothing (bit-identical results with them
+    off); a level's ``smoothing`` is a Gaussian of that many of its own pixels on both block-averaged images."""
+    from topomatch.stages.registration.io import read_image
+    from topomatch.stages.registration.params import RegisterParams, for_dimension
+    from topomatch.stages.registration.register import _Run, register
+
+    t1_slice = read_image(pd_slice.source.replace("BrainProtonDensitySlice", "BrainT1Slice"))
+    base = register(pd_slice, t1_slice)
+    assert "outline_alpha" not in base.measures
+    off = register(pd_slice, t1_slice, RegisterParams.model_validate({"metric": {"outline_alpha": None},
+                                                                      "outline_smoothing": 0}))
+    assert np.array_equal(base.transform.parameters, off.transform.parameters) and base.value == off.value
+    params = for_dimension(RegisterParams(), 2)
+    schedule = [lv.model_copy(update={"smoothing": 1.5}) for lv in params.schedule]
+    run = _Run(pd_slice, t1_slice, params.model_copy(update={"schedule": schedule}), None, None)
+    compared = 0
+    for level, spec in zip(run.levels, schedule):
+        for got, image in zip(level.images[:2], (pd_slice, t1_slice)):
+            small = image.shrink_to(spec.spacing, 8)
+            if got.spacing == small.spacing:  # a level with too few samples is measured on a finer grid
+                np.testing.assert_allclose(got.data, gaussian_blur(small.data, [1.5, 1.5]), atol=1e-12)
+                compared += 1
+    assert compared >= 4
