@@ -327,7 +327,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     label_of = read_labels(labels) if labels else {}
     db_path = Path(db)
     hashes = {str(f): hash_file(f) for f in files}
-    shapes: dict[str, Any] = {}  # mesh -> the clean of its full mesh (topology before and after)
+    shapes: dict[str, dict] = {}  # mesh -> the summary of the clean of its full mesh (topology after)
     t0 = time.perf_counter()
     plans: dict[str, tuple[PartReport, dict]] = {}
     todo: dict[str, list] = {}  # mesh -> its part items: one work unit, the shared stages computed once
@@ -347,7 +347,9 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
                 todo.setdefault(item.input_path, []).append(item)
         n_items = sum(map(len, todo.values()))
         with tqdm(total=n_items, desc=f"index {method}", unit="item", disable=not progress) as bar:
-            for group in executors.execute_groups(list(todo.values()), cache_dir(db_path), experiment.raw.executor):
+            # the workers send back a small record per item with its descriptor; the rest stays in the stage cache
+            for group in executors.execute_groups(list(todo.values()), cache_dir(db_path), experiment.raw.executor,
+                                                  keep=("descriptor",)):
                 for r in group:
                     part = r.item_id.split("/", 1)[0]
                     report, params = plans[part]
@@ -372,8 +374,8 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
         _prepare_ranking(db_path, method, set(todo))
     cleans = {path: c for path, c in shapes.items() if c is not None}
     return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0,
-                       sorted(p for p, c in cleans.items() if c.after.n_boundary_loops > 0),
-                       sorted(p for p, c in cleans.items() if c.dropped_components > 0), removed,
+                       sorted(p for p, c in cleans.items() if c["boundary_loops"] > 0),
+                       sorted(p for p, c in cleans.items() if c["dropped_components"] > 0), removed,
                        sorted(set(label_of) - present))
 
 
@@ -397,9 +399,10 @@ def _prepare_ranking(db: Path, method: str, indexed: set[str]) -> None:
         collection.part_matrices(method, collection.parts(method)[1])
 
 
-def _first_clean(result: ItemResult) -> Any:
-    """The first clean of an item's chain (the full mesh's: topology before and after), or None."""
-    return next((r for r in result.results.values() if hasattr(r, "dropped_components")), None)
+def _first_clean(result: ItemResult) -> dict | None:
+    """The summary of the first clean of an item's chain (the full mesh's: its topology after cleaning and the
+    components dropped), or None; read from the record, so the cleaned mesh stays in the worker's cache."""
+    return next((s for s in map(result.summary, result.results) if "dropped_components" in s), None)
 
 
 # --------------------------------------------------------------------------- query / evaluate
