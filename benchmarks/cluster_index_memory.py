@@ -20,6 +20,14 @@ second database with a cache of its own (computed again, not read from the first
 row by row (path, method, status, descriptor bytes) and evaluates both (``topomatch evaluate --json``: NN,
 mAP ...), which must be identical. The numbers go to ``benchmarks/results/cluster_index_memory.json`` under
 ``<tag>-<n>`` (``--tag``: default ``after``).
+
+``--sqlite ROWS`` measures instead how fast the index's rows can be written (the choice of docs/cluster.md):
+one writer on the client committing each row as it arrives (``ShapeIndex.put``, as ``topomatch index`` did
+before), the same committing at most once a second (as it does now: ``put(commit=False)``, ``commit()``), and
+per-worker shards (``--workers`` processes each
+writing its share into a database of its own, then merged into the index by the client with ``ATTACH`` and
+one ``INSERT ... SELECT``); descriptors of the default method's sizes (agd 8 x 11 endpoints, hks 256, shapedna
+30, d2 64, sh 544 values), into a fresh index in the scratch folder.
 """
 
 from __future__ import annotations
@@ -138,6 +146,78 @@ def rows_of(db: Path) -> list[tuple]:
                            "ORDER BY path, method").fetchall()
 
 
+PART_SIZES = {"agd": (8, 11), "hks": (256,), "shapedna": (30,), "d2": (64,), "sh": (544,)}
+
+
+def _rows(first: int, n_meshes: int):
+    import numpy as np
+
+    rng = np.random.default_rng(first)
+    for m in range(first, first + n_meshes):
+        for part, shape in PART_SIZES.items():
+            yield dict(content_hash=f"{m:064x}", path=f"/shared/meshes/{m}.off", label=None, method=part,
+                       params_hash="0" * 16, params={"stages": []}, status="ok", reason=None,
+                       n_endpoints=shape[0] if len(shape) == 2 else None,
+                       kind="endpoints" if len(shape) == 2 else "vector", descriptor=rng.random(shape), seconds=0.1)
+
+
+def _write_shard(path: str, first: int, n_meshes: int) -> None:
+    """One worker's shard: its meshes' rows, one commit per row (as a worker would, each mesh when it is done)."""
+    from topomatch.shape_index import ShapeIndex
+
+    with ShapeIndex(path) as shard:
+        for row in _rows(first, n_meshes):
+            shard.put(**row)
+
+
+def sqlite_writers(n_rows: int, workers: int, scratch: Path) -> dict:
+    """Seconds to write ``n_rows`` index rows: one client writer (per row, per mesh), per-worker shards merged."""
+    import multiprocessing
+
+    from topomatch.shape_index import COMMIT_SECONDS, ShapeIndex
+
+    n_meshes = n_rows // len(PART_SIZES)
+    out: dict = {"rows": n_meshes * len(PART_SIZES), "meshes": n_meshes}
+    t = time.perf_counter()
+    with ShapeIndex(scratch / "one.db") as db:
+        for row in _rows(0, n_meshes):
+            db.put(**row)
+    out["one_writer_commit_per_row_s"] = round(time.perf_counter() - t, 3)
+    t = time.perf_counter()
+    with ShapeIndex(scratch / "per_second.db") as db:  # what topomatch index does
+        committed = time.monotonic()
+        for row in _rows(0, n_meshes):
+            db.put(**row, commit=False)
+            if time.monotonic() - committed >= COMMIT_SECONDS:
+                db.commit()
+                committed = time.monotonic()
+        db.commit()
+    out["one_writer_commit_per_second_s"] = round(time.perf_counter() - t, 3)
+    share = -(-n_meshes // workers)
+    ctx = multiprocessing.get_context("forkserver")
+    t = time.perf_counter()
+    procs = [ctx.Process(target=_write_shard, args=(str(scratch / f"shard{w}.db"), w * share,
+                                                    min(share, n_meshes - w * share))) for w in range(workers)]
+    for proc in procs:
+        proc.start()
+    for proc in procs:
+        proc.join()
+    out["shards_written_s"] = round(time.perf_counter() - t, 3)
+    t = time.perf_counter()
+    with ShapeIndex(scratch / "merged.db") as db:
+        columns = ("content_hash, path, label, method, params_hash, params, status, reason, n_endpoints, kind, "
+                   "descriptor, seconds, created")
+        for w in range(workers):
+            db.db.execute("ATTACH DATABASE ? AS shard", (str(scratch / f"shard{w}.db"),))
+            db.db.execute(f"INSERT OR REPLACE INTO shapes ({columns}) SELECT {columns} FROM shard.shapes")
+            db.db.commit()
+            db.db.execute("DETACH DATABASE shard")
+    out["shards_merged_s"] = round(time.perf_counter() - t, 3)
+    out["one_writer_rows_per_s"] = {"commit_per_row": round(out["rows"] / out["one_writer_commit_per_row_s"]),
+                                     "commit_per_second": round(out["rows"] / out["one_writer_commit_per_second_s"])}
+    return out
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--n", type=int, default=400, help="meshes (default all 400)")
@@ -147,7 +227,16 @@ def main() -> None:
     p.add_argument("--tag", default="after", help="the record's name in the results (with -<n>)")
     p.add_argument("--local", action="store_true", help="also index with the local executor and compare")
     p.add_argument("--keep", action="store_true", help="keep the scratch folder")
+    p.add_argument("--sqlite", type=int, metavar="ROWS", help="only measure the index writers (see above)")
     args = p.parse_args()
+    if args.sqlite:
+        with tempfile.TemporaryDirectory(prefix="cluster-index-sqlite-") as scratch:
+            record = {**sqlite_writers(args.sqlite, args.workers, Path(scratch)), "load": os.getloadavg()[0]}
+        results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+        results[f"sqlite-{record['rows']}"] = record
+        RESULTS.write_text(json.dumps(results, indent=2) + "\n")
+        print(json.dumps(record, indent=2))
+        return
 
     folder = watertight()
     meshes = choose_meshes(folder, args.n)
