@@ -220,8 +220,10 @@ def _absolute(item: Item) -> Item:
     return dataclasses.replace(item, paths={k: os.path.abspath(v) for k, v in paths.items()})
 
 
-#: How often (seconds) a dask run looks at its scheduler while it waits for results.
+#: How often (seconds) a dask run looks at its scheduler while it waits for results, and how long it sleeps
+#: between looks at the finished tasks.
 _POLL = 0.5
+_STEP = 0.05
 
 
 def _dask(groups: Sequence[Sequence[Item]], cache_root: str | None,
@@ -312,46 +314,58 @@ class _DaskRun:
 
     def _collect(self, futures: dict[Any, int]) -> Iterator[tuple[int, Any]]:
         """(index, result or the task's exception) of each future as it completes; an ExecutorError when the
-        scheduler is lost or has had no worker for ``timeout`` seconds."""
-        from distributed import wait
-        from distributed.client import FuturesCancelledError
+        scheduler is lost or has had no worker for ``timeout`` seconds.
 
-        pending = dict(futures)
+        Streamed with ``distributed.as_completed`` (one watcher per future), each result released once yielded.
+        Waiting in steps with ``distributed.wait(pending, timeout, FIRST_COMPLETED)`` instead left one watcher
+        per pending future at every step: the client grew by 0.3 MB a task (185 MB after 400 trivial tasks
+        against 70 MB; 347 MB after indexing 400 meshes), whatever the tasks returned.
+        """
+        from distributed import as_completed
+
+        pending = set(futures)
+        done = as_completed(list(futures))
         no_workers_since: float | None = None
+        checked = time.monotonic()
         while pending:
-            try:
-                wait(list(pending), timeout=_POLL, return_when="FIRST_COMPLETED")
-            except (TimeoutError, FuturesCancelledError):  # nothing finished yet; cancelled: told below
-                pass
-            # "lost": the worker that held its result died, and the scheduler computes it again
-            for future in [f for f in pending if f.status not in ("pending", "lost")]:
+            batch = done.next_batch(block=False)
+            for future in batch:
+                if future.status in ("pending", "lost"):  # its worker died with the result: computed again
+                    done.add(future)
+                    continue
                 if future.status == "finished":
                     try:
                         value = future.result(timeout=self.timeout)
                     except TimeoutError:  # its worker died with the result, and no other computed it again yet
+                        done.add(future)
                         continue
                     except Exception as exc:  # the scheduler went away between the task's end and this fetch
                         raise self._lost(exc) from None
-                    pending.pop(future)
                 elif future.status == "error":
-                    pending.pop(future)
                     value = future.exception()
                 else:  # cancelled: the client lost its scheduler (reason scheduler-connection-lost)
                     raise self._lost(_cancel_reason(future))
+                pending.discard(future)
                 i = futures[future]
                 future.release()
                 yield i, value
-            if pending and self.client.status != "running":
+            if not pending:
+                break
+            if not batch:
+                time.sleep(_STEP)
+            if time.monotonic() - checked < _POLL:
+                continue
+            checked = time.monotonic()
+            if self.client.status != "running":
                 raise self._lost("scheduler-connection-lost" if self.client.status == "connecting"
                                  else f"the client is {self.client.status}")
-            if pending:
-                workers = self._n_workers()
-                if workers:
-                    no_workers_since = None
-                elif no_workers_since is None:
-                    no_workers_since = time.monotonic()
-                elif time.monotonic() - no_workers_since > self.timeout:
-                    raise self._no_workers(f"every worker left and none joined in {self.timeout:g} s", mid_run=True)
+            workers = self._n_workers()
+            if workers:
+                no_workers_since = None
+            elif no_workers_since is None:
+                no_workers_since = time.monotonic()
+            elif time.monotonic() - no_workers_since > self.timeout:
+                raise self._no_workers(f"every worker left and none joined in {self.timeout:g} s", mid_run=True)
 
     def _n_workers(self) -> int:
         try:
