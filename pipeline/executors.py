@@ -29,7 +29,8 @@ from contextlib import contextmanager
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from typing import Any, Collection, Iterator, Sequence
 
-from topomatch.pipeline.config import DEFAULT_DASK_TIMEOUT, ExecutorConfig, Item
+from topomatch.pipeline.experiment import Item
+from topomatch.pipeline.schema import DEFAULT_DASK_TIMEOUT, ExecutorConfig
 from topomatch.pipeline.errors import ConfigError, ExecutorError
 from topomatch.pipeline.item import ItemResult, run_records
 

@@ -32,7 +32,8 @@ from typing import Any
 from topomatch.pipeline.cache import Cache, hash_file, stage_key
 from pathlib import Path
 
-from topomatch.pipeline.config import Item, StageCall, check_chain, resolve_chain
+from topomatch.pipeline.chain import StageCall, check_chain, resolve_chain
+from topomatch.pipeline.experiment import Item
 from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.errors import InputError, StageError, TopomatchError
 from topomatch.pipeline.files import check_readable_file
