@@ -58,15 +58,22 @@ def resolve_chain(entries: list[Any] | tuple[Any, ...]) -> tuple[StageCall, ...]
     """Stage calls (validated params, unique labels) of a chain in config form (names or {name: params})."""
     calls, seen = [], {}
     for i, entry in enumerate(entries):
-        name, params = split_entry(entry, f"stages[{i}]")
-        try:
-            spec = get_stage(name)
-        except ConfigError as exc:
-            raise ConfigError(f"stages[{i}]: {exc}") from None
+        name, spec, params = _resolve(entry, f"stages[{i}]", get_stage)
         seen[name] = seen.get(name, 0) + 1
         label = name if seen[name] == 1 else f"{name}#{seen[name]}"
-        calls.append(StageCall(i, label, spec, spec.params.parse(params, f"stages[{i}].{name}")))
+        calls.append(StageCall(i, label, spec, params))
     return tuple(calls)
+
+
+def _resolve(entry: Any, where: str, lookup) -> tuple[str, Any, Params]:
+    """(name, spec, validated params) of a stage or report entry; ``lookup``: the registry's get_stage or
+    get_report. Errors name ``where`` (``stages[3]``, ``reports[0].table``)."""
+    name, params = split_entry(entry, where)
+    try:
+        spec = lookup(name)
+    except ConfigError as exc:
+        raise ConfigError(f"{where}: {exc}") from None
+    return name, spec, spec.params.parse(params, f"{where}.{name}")
 
 
 def check_chain(calls: tuple[StageCall, ...], available: set[str]) -> None:
@@ -101,10 +108,6 @@ def resolve_reports(entries: list[Any]) -> tuple[ReportCall, ...]:
     """Report calls (validated params) of a config's ``reports`` entries."""
     out = []
     for i, entry in enumerate(entries):
-        name, params = split_entry(entry, f"reports[{i}]")
-        try:
-            spec = get_report(name)
-        except ConfigError as exc:
-            raise ConfigError(f"reports[{i}]: {exc}") from None
-        out.append(ReportCall(i, name, spec.params.parse(params, f"reports[{i}].{name}")))
+        name, _, params = _resolve(entry, f"reports[{i}]", get_report)
+        out.append(ReportCall(i, name, params))
     return tuple(out)
