@@ -19,7 +19,7 @@ Schema (table ``shapes``)::
 Re-indexing skips rows whose (content_hash, method, params_hash) exist, so
 unchanged meshes are not recomputed and an interrupted index resumes. One process writes the
 index, the client of ``topomatch index``, from the small records its workers send back; it
-commits at most once a second (:data:`COMMIT_SECONDS`: a commit costs ~17 ms here, more on a
+commits at most once a second (:data:`COMMIT_SECONDS`: a commit cost 2-17 ms here, more on a
 network filesystem) and when it stops for any reason, so a killed client loses at most a
 second of rows, whose stage results are in the cache (docs/cluster.md: the measured choice).
 
