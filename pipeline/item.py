@@ -5,25 +5,37 @@ from the stage name, version, canonical params and the keys of the consumed stat
 reads the result from the cache or computes and stores it, and hands the produced entries on.
 A state entry without a key (an in-memory value given by the Python API) makes everything
 downstream of it uncached.
+
+What a worker sends back (:func:`run_records`) is a small record, not the results: each item's
+:class:`ItemResult` with its scalar summaries (the table row) and its stage results as a
+:class:`StoredResults`, which reads a result from the stage cache when it is asked for. Only the
+results the cache does not hold (no cache, an uncached chain, a value the codec cannot store) and
+the state entries the caller names (``keep``: e.g. the index's ``descriptor``) travel inline. So
+the client's memory does not grow with the collection: it holds one record per item (a few KB),
+and a report reads the results it draws, one item at a time (docs/cluster.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import json
 import time
 import traceback
 import typing
+from collections import OrderedDict
+from collections.abc import Collection, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from topomatch.pipeline.cache import Cache, hash_file, stage_key
 from pathlib import Path
 
-from topomatch.pipeline.config import Item, StageCall, check_chain, resolve_chain
+from topomatch.pipeline.chain import StageCall, check_chain, resolve_chain
+from topomatch.pipeline.experiment import Item
 from topomatch.pipeline.contract import StageSpec
-from topomatch.pipeline.errors import InputError, TopomatchError
+from topomatch.pipeline.errors import InputError, StageError, TopomatchError
 from topomatch.pipeline.files import check_readable_file
 
 
@@ -43,18 +55,30 @@ class ItemResult:
     error_stage: str | None = None
     traceback: str | None = None
     stage_produces: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    #: ``{label: result.summary()}``, made where the results were computed (a record); None: from ``results``
+    summaries: dict[str, dict[str, Any]] | None = None
 
     @property
     def ok(self) -> bool:
         return self.error is None
 
+    def final_label(self, state_key: str) -> str | None:
+        """The label of the last stage that produced the state entry ``state_key`` (None: no stage did)."""
+        return next((label for label in reversed(list(self.results))
+                     if state_key in self.stage_produces.get(label, ())), None)
+
     def final(self, state_key: str) -> Any:
-        """The last value of a state entry (e.g. ``"mesh"``) that the chain produced."""
-        value = None
-        for label, result in self.results.items():
-            if state_key in self.stage_produces.get(label, ()):
-                value = getattr(result, state_key)
-        return value
+        """The last value of a state entry (e.g. ``"mesh"``) that the chain produced (only that stage's result
+        is read: a record's others stay in the cache)."""
+        label = self.final_label(state_key)
+        return None if label is None else getattr(self.results[label], state_key)
+
+    def summary(self, label: str) -> dict[str, Any]:
+        """The scalar summary of the stage result ``label`` (its table columns)."""
+        if self.summaries is not None:
+            return self.summaries.get(label, {})
+        result = self.results[label]
+        return result.summary() if hasattr(result, "summary") else {}
 
     def row(self) -> dict[str, Any]:
         """Flat table row: item, input, sweep values, status, then ``label.column`` summaries."""
@@ -62,11 +86,72 @@ class ItemResult:
         row.update(self.sweep)
         row["status"] = "ok" if self.ok else "failed"
         row["error"] = self.error or ""
-        for label, result in self.results.items():
-            summary = result.summary() if hasattr(result, "summary") else {}
-            for column, value in summary.items():
+        for label in self.results:
+            for column, value in self.summary(label).items():
                 row[f"{label}.{column}"] = value
         return row
+
+
+class StoredResults(Mapping):
+    """An item's stage results by label (in chain order), read from the stage cache at ``root`` when one is asked
+    for; ``inline`` holds those that travel with the record. Nothing read is kept here (a few recent reads are, per
+    process: :data:`RECENT_READS`), so the records of a whole collection stay small.
+
+    Raises (on reading a result)
+    ----------------------------
+    StageError
+        The cache entry is gone or unusable (deleted or overwritten since the worker wrote it).
+    """
+
+    def __init__(self, keys: dict[str, str], root: str | None, inline: dict[str, Any]):
+        self.keys, self.root, self.inline = dict(keys), root, dict(inline)
+
+    def __len__(self) -> int:
+        return len(self.keys)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.keys)
+
+    def __contains__(self, label: object) -> bool:
+        return label in self.keys
+
+    def __getitem__(self, label: str) -> Any:
+        if label in self.inline:
+            return self.inline[label]
+        key = self.keys[label]  # KeyError for an unknown label, as a dict
+        if key in _RECENT:
+            _RECENT.move_to_end(key)
+            return _RECENT[key]
+        hit, value = Cache(self.root).get(key)
+        if not hit:
+            raise StageError(f"the result of stage {label} is no longer in the stage cache {self.root} (entry {key}): "
+                             "it was deleted or damaged after it was computed; run again to recompute it")
+        _RECENT[key] = value
+        while len(_RECENT) > RECENT_READS:
+            _RECENT.popitem(last=False)
+        return value
+
+    def __repr__(self) -> str:
+        return f"StoredResults({list(self.keys)}, inline={list(self.inline)}, cache={self.root!r})"
+
+
+#: Results read from the cache most recently, kept per process (a report that asks for an item's mesh, then its
+#: function, reads each once).
+RECENT_READS = 4
+_RECENT: OrderedDict[str, Any] = OrderedDict()
+
+
+def to_record(result: ItemResult, cache_root: str | None, keep: Collection[str] = ()) -> ItemResult:
+    """``result`` as a worker sends it back: its summaries made here, its results left in the cache at ``cache_root``
+    (:class:`StoredResults`) except those the cache does not hold and the final producers of the state entries
+    ``keep`` (e.g. ``("descriptor",)``), which travel inline."""
+    cache = Cache(cache_root)
+    kept = {result.final_label(entry) for entry in keep} - {None}
+    inline = {label: value for label, value in result.results.items()
+              if label in kept or not result.keys.get(label) or result.keys[label] not in cache}
+    summaries = {label: result.summary(label) for label in result.results}
+    stored = StoredResults({label: result.keys.get(label, "") for label in result.results}, cache_root, inline)
+    return dataclasses.replace(result, results=stored, summaries=summaries)
 
 
 def run_item(item: Item, cache_root: str | None, memo: dict[str, Any] | None = None) -> ItemResult:
@@ -92,6 +177,12 @@ def run_items(items: list[Item], cache_root: str | None) -> list[ItemResult]:
     that every part method of a fusion starts with)."""
     memo: dict[str, Any] = {}
     return [run_item(item, cache_root, memo) for item in items]
+
+
+def run_records(items: list[Item], cache_root: str | None, keep: Collection[str] = ()) -> list[ItemResult]:
+    """:func:`run_items`, returning each item's small record (:func:`to_record`): what every executor's worker runs
+    (the local pool, a dask worker, and the client itself when it computes inline)."""
+    return [to_record(result, cache_root, keep) for result in run_items(items, cache_root)]
 
 
 def run_stages(chain: list[Any] | tuple[Any, ...], *, paths: dict[str, str | Path] | None = None,

@@ -8,7 +8,7 @@ from datetime import datetime, timezone
 from importlib import metadata
 from typing import Any
 
-from topomatch.pipeline.config import Experiment
+from topomatch.pipeline.experiment import Experiment
 from topomatch.pipeline.item import ItemResult
 
 #: Distributions whose versions are recorded in every manifest.

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
-from topomatch.pipeline.config import Experiment
+from topomatch.pipeline.experiment import Experiment
 from topomatch.pipeline.executors import execute
 from topomatch.pipeline.files import atomic_write_text
 from topomatch.pipeline.item import ItemResult

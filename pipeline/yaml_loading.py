@@ -18,11 +18,12 @@ hundred bytes can cost minutes and gigabytes:
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Any
 
 import yaml
 
-from topomatch.pipeline.errors import ConfigError
+from topomatch.pipeline.errors import ConfigError, InputError
 
 #: Largest YAML text (bytes).
 MAX_BYTES = 4 * 2**20
@@ -119,3 +120,32 @@ def load_yaml(text: str) -> Any:
         raise ConfigError(f"nested too deeply to parse (more than {MAX_DEPTH} levels are refused)") from None
     finally:
         loader.dispose()
+
+
+def read_yaml(path: str | Path) -> dict[str, Any]:
+    """Safe-load a YAML mapping; errors name the file."""
+    path = Path(path)
+    if not path.exists():
+        raise InputError(path, "config file not found")
+    if path.is_dir():
+        raise InputError(path, "is a folder, not a config file: give the YAML file")
+    if not path.is_file():  # a FIFO would block the read
+        raise InputError(path, "not a regular file (a FIFO, socket or device): a config is a YAML text file")
+    try:
+        if path.stat().st_size > 4 * 2**20:
+            raise ConfigError(f"{path}: config file larger than 4 MiB: refused")
+        data = path.read_bytes()
+    except OSError as exc:
+        raise InputError(path, f"cannot read config ({exc.strerror or exc})") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte 0x{data[exc.start]:02x} at offset {exc.start}): a config "
+                          f"is a YAML text file") from None
+    try:
+        data = load_yaml(text)
+    except ConfigError as exc:
+        raise ConfigError(f"{path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: a config must be a YAML mapping, got {type(data).__name__}")
+    return data

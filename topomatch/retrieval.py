@@ -15,6 +15,7 @@ dissimilarities; it needs a collection, so :func:`match` takes a single method.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
@@ -30,7 +31,7 @@ from topomatch.pipeline.config import Experiment, build_experiment
 from topomatch.pipeline.errors import ConfigError, InputError, InputWarning, StageError
 from topomatch.pipeline.files import check_writable_folder
 from topomatch.pipeline.item import ItemResult, run_item
-from topomatch.shape_index import Row, ShapeIndex
+from topomatch.shape_index import COMMIT_SECONDS, Row, ShapeIndex
 from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, DEFAULT_PAIR_METHOD, Method, get_method
 from topomatch.stages.retrieval.descriptor import Descriptor, MatchOptions
 
@@ -327,7 +328,7 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
     label_of = read_labels(labels) if labels else {}
     db_path = Path(db)
     hashes = {str(f): hash_file(f) for f in files}
-    shapes: dict[str, Any] = {}  # mesh -> the clean of its full mesh (topology before and after)
+    shapes: dict[str, dict] = {}  # mesh -> the summary of the clean of its full mesh (topology after)
     t0 = time.perf_counter()
     plans: dict[str, tuple[PartReport, dict]] = {}
     todo: dict[str, list] = {}  # mesh -> its part items: one work unit, the shared stages computed once
@@ -346,22 +347,37 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
             for item in mine:
                 todo.setdefault(item.input_path, []).append(item)
         n_items = sum(map(len, todo.values()))
+        committed = time.monotonic()
         with tqdm(total=n_items, desc=f"index {method}", unit="item", disable=not progress) as bar:
-            for group in executors.execute_groups(list(todo.values()), cache_dir(db_path), experiment.raw.executor):
-                for r in group:
-                    part = r.item_id.split("/", 1)[0]
-                    report, params = plans[part]
-                    d = r.final("descriptor")
-                    store.put(content_hash=hashes[r.input_path], path=r.input_path, label=label_of.get(r.input_path),
-                              method=part, params_hash=report.params_hash, params=params,
-                              status="ok" if r.ok else "failed", reason=r.error,
-                              n_endpoints=None if d is None else d.n_endpoints, kind=None if d is None else d.kind,
-                              descriptor=None if d is None else d.data, seconds=sum(r.seconds.values()))
-                    shapes.setdefault(r.input_path, _first_clean(r))
-                    report.done += r.ok
-                    report.failed += not r.ok
-                    report.seconds += sum(r.seconds.values())
-                    bar.update()
+            try:
+                # the workers send back a small record per item with its descriptor; the rest stays in the stage
+                # cache. This process alone writes the index: committing at most once a second (COMMIT_SECONDS)
+                # and whenever it stops (an error, Ctrl-C, a lost scheduler), so what finished is kept.
+                for group in executors.execute_groups(list(todo.values()), cache_dir(db_path), experiment.raw.executor,
+                                                      keep=("descriptor",)):
+                    for r in group:
+                        part = r.item_id.split("/", 1)[0]
+                        report, params = plans[part]
+                        d = r.final("descriptor")
+                        store.put(content_hash=hashes[r.input_path], path=r.input_path,
+                                  label=label_of.get(r.input_path), method=part, params_hash=report.params_hash,
+                                  params=params, status="ok" if r.ok else "failed", reason=r.error,
+                                  n_endpoints=None if d is None else d.n_endpoints, kind=None if d is None else d.kind,
+                                  descriptor=None if d is None else d.data, seconds=sum(r.seconds.values()),
+                                  commit=False)
+                        shapes.setdefault(r.input_path, _first_clean(r))
+                        report.done += r.ok
+                        report.failed += not r.ok
+                        report.seconds += sum(r.seconds.values())
+                        bar.update()
+                    if time.monotonic() - committed >= COMMIT_SECONDS:
+                        store.commit()
+                        committed = time.monotonic()
+            except BaseException:
+                with contextlib.suppress(InputError):  # the rows written so far are kept; the first error is told
+                    store.commit()
+                raise
+            store.commit()
         if label_of:
             store.set_labels(label_of)
         for report, _ in plans.values():
@@ -372,8 +388,8 @@ def index(paths: list[str | Path], db: str | Path, *, method: str = DEFAULT_METH
         _prepare_ranking(db_path, method, set(todo))
     cleans = {path: c for path, c in shapes.items() if c is not None}
     return IndexReport(str(db_path), method, len(files), [p for p, _ in plans.values()], time.perf_counter() - t0,
-                       sorted(p for p, c in cleans.items() if c.after.n_boundary_loops > 0),
-                       sorted(p for p, c in cleans.items() if c.dropped_components > 0), removed,
+                       sorted(p for p, c in cleans.items() if c["boundary_loops"] > 0),
+                       sorted(p for p, c in cleans.items() if c["dropped_components"] > 0), removed,
                        sorted(set(label_of) - present))
 
 
@@ -397,9 +413,10 @@ def _prepare_ranking(db: Path, method: str, indexed: set[str]) -> None:
         collection.part_matrices(method, collection.parts(method)[1])
 
 
-def _first_clean(result: ItemResult) -> Any:
-    """The first clean of an item's chain (the full mesh's: topology before and after), or None."""
-    return next((r for r in result.results.values() if hasattr(r, "dropped_components")), None)
+def _first_clean(result: ItemResult) -> dict | None:
+    """The summary of the first clean of an item's chain (the full mesh's: its topology after cleaning and the
+    components dropped), or None; read from the record, so the cleaned mesh stays in the worker's cache."""
+    return next((s for s in map(result.summary, result.results) if "dropped_components" in s), None)
 
 
 # --------------------------------------------------------------------------- query / evaluate

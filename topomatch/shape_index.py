@@ -17,8 +17,11 @@ Schema (table ``shapes``)::
     created       UTC time
 
 Re-indexing skips rows whose (content_hash, method, params_hash) exist, so
-unchanged meshes are not recomputed and an interrupted index resumes; each row
-is committed as soon as its mesh is done.
+unchanged meshes are not recomputed and an interrupted index resumes. One process writes the
+index, the client of ``topomatch index``, from the small records its workers send back; it
+commits at most once a second (:data:`COMMIT_SECONDS`: a commit cost 2-17 ms here, more on a
+network filesystem) and when it stops for any reason, so a killed client loses at most a
+second of rows, whose stage results are in the cache (docs/cluster.md: the measured choice).
 
 Every SQLite error becomes an :class:`~topomatch.pipeline.errors.InputError` naming the file:
 a database another process holds is waited for (:data:`BUSY_SECONDS`) and then reported as
@@ -130,6 +133,8 @@ def _row(r: tuple, where: Path) -> Row:
 
 #: How long a database locked by another process is waited for (seconds).
 BUSY_SECONDS = 60.0
+#: ``topomatch index`` commits its rows at most this often (seconds), and when it stops.
+COMMIT_SECONDS = 1.0
 
 
 def _problem(exc: sqlite3.Error) -> str:
@@ -217,9 +222,10 @@ class ShapeIndex:
 
     def put(self, *, content_hash: str, path: str, label: str | None, method: str, params_hash: str, params: dict,
             status: str, reason: str | None = None, n_endpoints: int | None = None, kind: str | None = None,
-            descriptor: np.ndarray | None = None, seconds: float | None = None) -> None:
+            descriptor: np.ndarray | None = None, seconds: float | None = None, commit: bool = True) -> None:
         """Insert or replace one row and commit (a lock held by another process is waited for); a row of an
-        earlier content of the same file (same path, method and params) is replaced too."""
+        earlier content of the same file (same path, method and params) is replaced too. ``commit=False`` leaves
+        the commit to a later :meth:`commit` (rows written together: one commit for many)."""
         self._sql("DELETE FROM shapes WHERE path = ? AND method = ? AND params_hash = ? AND content_hash != ?",
                   (path, method, params_hash, content_hash))
         if label is None:  # the file's label from another method's row (labels belong to files, not methods)
@@ -231,7 +237,8 @@ class ShapeIndex:
             (content_hash, path, label, method, params_hash, json.dumps(params), status, reason, n_endpoints, kind,
              None if descriptor is None else _to_blob(descriptor), seconds,
              datetime.now(timezone.utc).isoformat(timespec="seconds")))
-        self._commit()
+        if commit:
+            self._commit()
 
     def remove_missing(self, folders: list[Path], present: set[str], methods: tuple[str, ...]) -> int:
         """Delete the rows of ``methods`` whose file lies under one of ``folders`` but is not in ``present``
@@ -244,6 +251,10 @@ class ShapeIndex:
                 removed += 1
         self._commit()
         return removed
+
+    def commit(self) -> None:
+        """Commit the rows written with ``put(commit=False)``."""
+        self._commit()
 
     def _commit(self) -> None:
         try:

@@ -183,24 +183,38 @@ def test_workers_without_a_stage_module_are_refused_before_any_work(cluster_fact
 
 
 def test_index_on_a_cluster_is_the_local_index_computed_with_one_blas_thread(cluster_factory, tmp_path, capfd):
+    """The default (fused) method's index through the cluster equals the local one, row for row; what a worker
+    sends back for a mesh is a record of a few KB (its descriptor kept), the results staying in the cache."""
+    import pickle  # the size of a worker's answer on the wire (dask pickles it)
+
     cluster = cluster_factory(2, nanny=False)
     folder = tmp_path / "meshes"
     folder.mkdir()
     for name in MESHES:
         (folder / name).symlink_to(BUNDLED_MESHES / name)
-    rows = {}
+    rows, reports = {}, {}
     for kind, options in (("local", ["--workers", "1"]), ("dask", ["--executor", "dask", "--address", cluster.address])):
         db = tmp_path / f"{kind}.db"
-        status, out, err = _cli(["index", str(folder), "--db", str(db), "--method", "d2", "--json", "--no-progress",
-                                 *options], capfd, "index")
-        assert status == 0 and out["parts"][0]["indexed"] == 4, err
-        rows[kind] = sqlite3.connect(db).execute("SELECT path, status, descriptor FROM shapes ORDER BY path").fetchall()
-    assert rows["dask"] == rows["local"] and len(rows["local"]) == 4
+        status, out, err = _cli(["index", str(folder), "--db", str(db), "--json", "--no-progress", *options], capfd,
+                                "index")
+        assert status == 0 and [part["indexed"] for part in out["parts"]] == [4] * 5, err
+        rows[kind] = sqlite3.connect(db).execute("SELECT path, method, status, n_endpoints, kind, descriptor FROM shapes "
+                                                 "ORDER BY path, method").fetchall()
+        reports[kind] = {k: v for k, v in out.items() if k not in ("db", "seconds", "parts")}
+    assert rows["dask"] == rows["local"] and len(rows["local"]) == 4 * 5
+    assert reports["dask"] == reports["local"]
     from distributed import Client
+
+    from topomatch.pipeline.executors import _dask_task
+    from topomatch.retrieval import method_experiment
 
     with Client(cluster.address) as client:  # workers started without a nanny (no thread settings) compute with one
         threads = client.run(dask_stages.blas_threads)
+        items = method_experiment("hks", [BUNDLED_MESHES / "odedstein_hand_closed.obj.gz"]).items()  # results: MBs
+        (record,) = client.submit(_dask_task, items, str(tmp_path / "records"), ("descriptor",), pure=False).result()
     assert len(threads) == 2 and all(counts and set(counts) == {1} for counts in threads.values()), threads
+    assert record.ok and len(pickle.dumps(record)) < 8_000 and list(record.results.inline) == ["hks"]
+    assert record.final("spectrum").values.shape == (41,)  # read from the cache the worker wrote
 
 
 class _KillAfterTheFirstItem(threading.Thread):

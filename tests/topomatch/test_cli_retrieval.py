@@ -98,8 +98,8 @@ def test_interrupted_index_resumes(collection, tmp_path, capsys, monkeypatch):
 
     original = ex.execute_groups
 
-    def interrupted(groups, cache, config):  # Ctrl-C after three meshes
-        for i, results in enumerate(original(groups, cache, config)):
+    def interrupted(groups, cache, config, **kw):  # Ctrl-C after three meshes
+        for i, results in enumerate(original(groups, cache, config, **kw)):
             if i == 3:
                 raise KeyboardInterrupt
             yield results
