@@ -58,7 +58,7 @@ class RegistrationOutcome:
     JSON fields (:meth:`to_dict`): ``fixed``, ``moving`` (names), ``dimension`` (2 or 3), ``convention``,
     ``names`` and ``parameters`` (SimpleITK's order: angles in radians, then the translation), ``angles``
     (degrees), ``translation``, ``center`` (c), ``matrix`` (the homogeneous fixed-to-moving matrix, row-major),
-    ``metric``, ``alpha``, ``method``, ``objective`` (the measure at the result), ``iterations``,
+    ``metric``, ``alpha`` (the order used: ``metric.outline_alpha`` on an outline-only pair), ``method``, ``objective`` (the measure at the result), ``iterations``,
     ``evaluations``, ``overlap``, ``seconds``, ``ok`` (the self-check passed), ``reason`` (why not) and
     ``flags`` (the names of the tests that failed); in 2D also ``tx``, ``ty`` and ``angle`` (degrees), the
     names of the previous release. Besides them: ``registration`` (the full
@@ -91,7 +91,7 @@ class RegistrationOutcome:
                "angles": [round(a, 6) for a in t.angles_deg], "translation": [round(float(v), 6) for v in t.translation],
                "center": [round(float(c), 6) for c in t.center],
                "matrix": [[round(float(v), 9) for v in row] for row in t.matrix()],
-               "metric": self.metric, "alpha": self.alpha, "method": reg.method, "objective": reg.value,
+               "metric": self.metric, "alpha": reg.measures.get("outline_alpha", self.alpha), "method": reg.method, "objective": reg.value,
                "iterations": reg.iterations, "evaluations": reg.evaluations, "overlap": round(reg.overlap, 4),
                "seconds": round(reg.seconds, 4), "ok": reg.ok, "reason": reg.reason,
                "flags": [f.check for f in reg.flags]}

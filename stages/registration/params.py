@@ -167,7 +167,7 @@ class CheckSpec(Params):
                                description="such a pair is flagged when the two outlines lie farther apart than this "
                                            "(physical units, mean, compared within 4 fixed pixels of the fixed "
                                            "outline) at the result: outlines that do not correspond at all "
-                                           "(the validation corpus's correct outline-only results: at most 5.4); "
+                                           "(the validation corpus's correct outline-only results: at most 5.8); "
                                            "0 flags every such pair")
     outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
                                 description="such a pair is flagged when a coarser level's measure is lower at the "

@@ -176,3 +176,25 @@ def test_2d_outputs_include_an_itk_transform_and_the_input_format(capsys, itk_di
     assert code == 0 and (tmp_path / "nii" / "moving_resampled.nii.gz").is_file()
     back = sitk.GetArrayFromImage(sitk.ReadImage(str(tmp_path / "nii" / "moving_resampled.nii.gz")))
     assert back.shape == np.asarray(PILImage.open(fixed_png)).shape
+
+
+def test_cli_json_reports_the_order_used_on_an_outline_only_pair(capsys, pd_slice, tmp_path):
+    """A silhouette of the PD slice (a NIfTI file, uniform inside) moved by a known T: ``topomatch register
+    --json`` reports ``alpha`` 1 (``metric.outline_alpha``), the order it used, and recovers T; an ordinary pair
+    reports the metric's own 2."""
+    import SimpleITK as sitk
+
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.structure import object_mask
+    from topomatch.stages.registration.transform import RigidTransform
+
+    silhouette = pd_slice.with_data(np.where(object_mask(pd_slice), 100.0, 0.0))
+    path = tmp_path / "silhouette.nii.gz"
+    sitk.WriteImage(sitk.GetImageFromArray(moved(silhouette, RigidTransform.euler2d(8.0, 5.0, -4.0, pd_slice.center))
+                                           .data.astype(np.float32)), str(path))
+    code, out, _ = register_cli(capsys, pd_slice.source, path, "--json")
+    data = json.loads(out)
+    assert code == 0 and data["alpha"] == 1.0 and data["metric"] == "jt"
+    assert abs(data["angle"] + 4.0) < 0.3 and abs(data["tx"] - 8.0) < 0.5 and abs(data["ty"] - 5.0) < 0.5
+    code, out, _ = register_cli(capsys, pd_slice.source, pd_slice.source, "--json")
+    assert json.loads(out)["alpha"] == 2.0
