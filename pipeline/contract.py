@@ -1,8 +1,10 @@
 """The contract between the engine and the science: all that ``stages/`` imports from ``pipeline/``.
 
 A stage is a plain function ``func(*consumed_state, params) -> result``; a report is a function
-``func(experiment, results, params) -> ReportOutput``. The :func:`stage` and :func:`report`
-decorators only attach their metadata (:class:`StageSpec`, :class:`ReportSpec`) to the function;
+``func(experiment, results, params) -> ReportOutput``; an input kind (a key under a config's ``inputs:``)
+is a function ``func(value, files) -> list[InputUnit]``. The :func:`stage`, :func:`report` and
+:func:`input_kind` decorators only attach their metadata (:class:`StageSpec`, :class:`ReportSpec`,
+:class:`InputSpec`) to the function;
 the engine's registry (:mod:`topomatch.pipeline.registry`) finds them by the entry points that
 their distribution declares (``pyproject.toml``). Nothing here imports the runner, the cache or the CLI, and nothing here
 knows a domain.
@@ -19,13 +21,14 @@ from typing import Any, Callable
 
 from topomatch.pipeline.errors import ConfigError, InputError, InputWarning, StageError, TopomatchError
 from topomatch.pipeline.files import atomic_write_bytes, atomic_write_text, check_readable_file, limit_from_env
+from topomatch.pipeline.inputs import InputFiles, InputSpec, InputUnit, input_kind
 from topomatch.pipeline.mappings import deep_merge
 from topomatch.pipeline.params import Params
 
 __all__ = [
     "ConfigError", "InputError", "InputWarning", "StageError", "TopomatchError", "Params", "StageResult", "StageSpec", "stage",
     "ReportOutput", "ReportSpec", "report", "gallery_layout", "axis_label", "atomic_write_bytes", "atomic_write_text",
-    "check_readable_file", "limit_from_env", "deep_merge",
+    "check_readable_file", "limit_from_env", "deep_merge", "InputFiles", "InputSpec", "InputUnit", "input_kind",
 ]
 
 

@@ -12,10 +12,10 @@ from typing import Any
 
 from topomatch.pipeline.chain import ReportCall, StageCall, check_chain, resolve_chain, resolve_reports
 from topomatch.pipeline.errors import ConfigError
-from topomatch.pipeline.inputs import INPUT_STATE, InputUnit, resolve_inputs_config
+from topomatch.pipeline.inputs import InputFiles, InputUnit, check_inputs, given_state, resolve_inputs_config
 from topomatch.pipeline.overrides import apply_overrides
+from topomatch.pipeline.registry import get_input
 from topomatch.pipeline.params import validate_json_strict
-from topomatch.pipeline.paths import resolve_input
 from topomatch.pipeline.schema import RawConfig
 from topomatch.pipeline.sweeps import check_sweeps, sweep_points, with_overrides
 from topomatch.pipeline.yaml_loading import read_yaml
@@ -88,8 +88,7 @@ class Experiment:
 
         Raises ConfigError / InputError naming ``where`` and the file.
         """
-        base = self.source.parent if self.source else Path.cwd()
-        return resolve_input(template, base_dir=base, root=self.data_root, where=where)[0]
+        return InputFiles(self.source.parent if self.source else Path.cwd(), self.data_root).one(template, where)
 
     def content_hash(self) -> str:
         """Hash of what determines the results (not the executor), 12 hex digits."""
@@ -114,8 +113,9 @@ def build_experiment(
     try:
         raw = validate_json_strict(RawConfig, data, "")
         calls = resolve_chain(raw.stages)
-        given = {key for kind, keys in INPUT_STATE.items() if getattr(raw.inputs, kind) for key in keys}
-        if not given and any(k in call.spec.consumes for call in calls for keys in INPUT_STATE.values() for k in keys):
+        inputs = check_inputs(raw.inputs, get_input)
+        given = given_state(inputs)
+        if not given:
             raise ConfigError("inputs: the chain reads input files, and the config lists none; give e.g. "
                               "inputs: {meshes: [\"{bundled}/meshes/*.off\"]}")
         check_chain(calls, given)
@@ -128,7 +128,7 @@ def build_experiment(
     if resolve_inputs:
         base = source.parent if source else Path.cwd()
         try:
-            paths = resolve_inputs_config(raw.inputs, base_dir=base, data_root=data_root)
+            paths = resolve_inputs_config(inputs, base_dir=base, data_root=data_root)
         except ConfigError as exc:
             raise ConfigError(prefix + str(exc)) from None
         experiment.inputs = paths

@@ -1,14 +1,15 @@
-"""The registry: the YAML name of a stage or report -> its spec, found through package metadata.
+"""The registry: the YAML name of a stage, report or input kind -> its spec, found through package metadata.
 
-Stages and reports mark themselves with the :func:`~topomatch.pipeline.contract.stage` and
-:func:`~topomatch.pipeline.contract.report` decorators, which only attach a spec to the function. A
+Stages, reports and input kinds mark themselves with the :func:`~topomatch.pipeline.contract.stage`,
+:func:`~topomatch.pipeline.contract.report` and :func:`~topomatch.pipeline.contract.input_kind`
+decorators, which only attach a spec to the function. A
 distribution declares its own as entry points, one per name, in the groups of :data:`GROUPS`
 (topomatch's are in its ``pyproject.toml``)::
 
     [project.entry-points."topomatch.stages"]
     decimate = "topomatch.stages.mesh.decimate:decimate"
 
-- :func:`get_stage` / :func:`get_report` find the name among the entry points of every installed
+- :func:`get_stage` / :func:`get_report` / :func:`get_input` find the name among the entry points of every installed
   distribution and import that one module: a command imports only the science it runs, and a
   user's package that declares entry points is found in every process where it is installed (Dask
   workers included) with no call of its own. A name declared by two distributions is an error.
@@ -29,30 +30,34 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+import re
 import typing
 from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
-from topomatch.pipeline.contract import ReportSpec, StageSpec
+from topomatch.pipeline.contract import InputSpec, ReportSpec, StageSpec
 from topomatch.pipeline.errors import ConfigError
 from topomatch.pipeline.params import Params
 
 #: Entry-point group of each kind of function.
-GROUPS: dict[str, str] = {"stage": "topomatch.stages", "report": "topomatch.reports"}
+GROUPS: dict[str, str] = {"stage": "topomatch.stages", "report": "topomatch.reports", "input": "topomatch.inputs"}
 
 #: topomatch's own packages: every module in them is imported by :func:`discover` (recursively).
 BUILTIN_PACKAGES: tuple[str, ...] = ("topomatch.pipeline.builtin_reports", "topomatch.stages")
 
 STAGES: dict[str, StageSpec] = {}
 REPORTS: dict[str, ReportSpec] = {}
-_TABLES: dict[str, dict] = {"stage": STAGES, "report": REPORTS}
+INPUTS: dict[str, InputSpec] = {}
+_TABLES: dict[str, dict] = {"stage": STAGES, "report": REPORTS, "input": INPUTS}
+_WORDS = {"stage": ("stage", "stages"), "report": ("report", "reports"), "input": ("kind of input", "kinds of input")}
+_SPEC_KINDS: dict[type, str] = {StageSpec: "stage", ReportSpec: "report", InputSpec: "input"}
 _SCANNED: list[str] = []  # the built-in modules imported by discover(), in order
 _DECLARED: dict[str, dict[str, list[EntryPoint]]] = {}  # kind -> name -> entry points, read once
 
 
 def declared(kind: str) -> dict[str, list[EntryPoint]]:
     """Name -> the entry points that declare it, over every installed distribution, for ``kind``
-    ``'stage'`` or ``'report'`` (read from the metadata once per process)."""
+    ``'stage'``, ``'report'`` or ``'input'`` (read from the metadata once per process)."""
     if kind not in _DECLARED:
         table: dict[str, list[EntryPoint]] = {}
         for ep in entry_points(group=GROUPS[kind]):
@@ -103,18 +108,23 @@ def builtin_modules(packages: tuple[str, ...] = BUILTIN_PACKAGES) -> list[str]:
     return sorted(set(names))
 
 
-def marked(module) -> list[StageSpec | ReportSpec]:
-    """The specs of the stages and reports defined in ``module`` (not those it imports)."""
+def marked(module) -> list[StageSpec | ReportSpec | InputSpec]:
+    """The specs of the stages, reports and input kinds defined in ``module`` (not those it imports)."""
     specs = []
     for obj in vars(module).values():
         if getattr(obj, "__module__", None) == module.__name__:
-            specs += [s for s in (getattr(obj, "stage_spec", None), getattr(obj, "report_spec", None)) if s is not None]
+            specs += [s for s in (getattr(obj, f"{kind}_spec", None) for kind in GROUPS) if s is not None]
     return specs
+
+
+def spec_kind(spec: StageSpec | ReportSpec | InputSpec) -> str:
+    """``'stage'``, ``'report'`` or ``'input'``: the kind of function a spec describes."""
+    return _SPEC_KINDS[type(spec)]
 
 
 def _collect(module) -> None:
     for spec in marked(module):
-        kind = "stage" if isinstance(spec, StageSpec) else "report"
+        kind = spec_kind(spec)
         table = _TABLES[kind]
         known = table.get(spec.name)
         if known is not None and known.func is not spec.func:
@@ -155,14 +165,22 @@ def get_report(name: str) -> ReportSpec:
     return _lookup("report", name)
 
 
-def _lookup(kind: str, name: str):
+def get_input(name: str, where: str = "") -> InputSpec:
+    """The input kind called ``name`` (a key under a config's ``inputs:``); a :class:`ConfigError` starting
+    with ``where`` and listing the known kinds otherwise."""
+    return _lookup("input", name, where)
+
+
+def _lookup(kind: str, name: str, where: str = ""):
     table = _TABLES[kind]
     if name not in table and not _load_declared(kind, name):
         discover()  # a name the metadata does not declare (yet)
     try:
         return table[name]
     except KeyError:
-        raise ConfigError(f"unknown {kind} {name!r}; known {kind}s: {', '.join(sorted(table))}") from None
+        one, many = _WORDS[kind]
+        raise ConfigError(f"{where + ': ' if where else ''}unknown {one} {name!r}; known {many}: "
+                          f"{', '.join(sorted(table))}") from None
 
 
 def type_label(hint: Any) -> str:
@@ -171,7 +189,14 @@ def type_label(hint: Any) -> str:
         return " | ".join(repr(a) for a in typing.get_args(hint))
     if isinstance(hint, type) and not typing.get_args(hint):
         return hint.__name__
-    return str(hint).replace("typing.", "").replace("NoneType", "None")
+    return re.sub(r"\b(?:\w+\.)+(\w+)", r"\1", str(hint)).replace("NoneType", "None")  # no module paths
+
+
+def model_in(hint: Any) -> type[Params] | None:
+    """The parameter model a type hint holds (``PairConfig`` in ``list[PairConfig]`` or ``PairConfig | None``)."""
+    if isinstance(hint, type) and issubclass(hint, Params):
+        return hint
+    return next((m for m in map(model_in, typing.get_args(hint)) if m is not None), None)
 
 
 def describe_params(params: type[Params]) -> list[tuple[str, str, Any, str]]:

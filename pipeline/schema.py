@@ -1,7 +1,8 @@
 """The config file's structure, as pydantic models: what keys a config may have and their types.
 
-:class:`RawConfig` is a config file before its stage names and parameters are resolved
-(:mod:`topomatch.pipeline.experiment` does that). Every model is strict and rejects unknown keys, so
+:class:`RawConfig` is a config file before its stage names, parameters and input kinds are resolved
+(:mod:`topomatch.pipeline.experiment` does that; the kinds of input are declared by the domains,
+:mod:`topomatch.pipeline.inputs`). Every model is strict and rejects unknown keys, so
 ``"5"`` is not an int and a misspelt key is an error with its path.
 """
 
@@ -76,35 +77,6 @@ class ExecutorConfig(_Strict):
                               f"of {self.workers} workers")
 
 
-class PairConfig(_Strict):
-    """A fixed/moving image pair with an optional known transform."""
-
-    fixed: str
-    moving: str
-    truth: dict[str, float] | None = Field(None, description="known parameters, e.g. {tx: 13, ty: 17, angle: 0}")
-    label: str | None = Field(None, min_length=1, description="the pair's name in tables and figures, e.g. 'slice "
-                                                             "30|slice 31' (default: the two file names)")
-
-
-class PairsCsvConfig(_Strict):
-    """Image pairs listed in a CSV file (paths relative to the CSV's folder)."""
-
-    path: str
-    fixed_column: str = "fixed"
-    moving_column: str = "moving"
-    truth_columns: dict[str, str] = Field(default_factory=dict, description="truth name -> CSV column")
-    skip_missing_truth: bool = Field(True, description="leave out rows whose truth cells are empty")
-
-
-class InputsConfig(_Strict):
-    """Input files, as path templates ({bundled}, {data_root}, globs)."""
-
-    meshes: list[str] = Field(default_factory=list)
-    images: list[str] = Field(default_factory=list)
-    pairs: list[PairConfig] = Field(default_factory=list)
-    pairs_csv: PairsCsvConfig | None = None
-
-
 #: Most sweep points a config may ask for (a grid's size is the product of its value counts).
 MAX_SWEEP_POINTS = 10_000
 
@@ -114,7 +86,9 @@ class RawConfig(_Strict):
 
     name: str = Field(pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
     description: str = ""
-    inputs: InputsConfig = InputsConfig()
+    inputs: dict[str, Any] = Field(
+        default_factory=dict, description="input kind -> its value, e.g. {meshes: [templates]}; each kind is declared "
+                                          "by a domain (pipeline/inputs.py) and checks its own value")
     sweep: dict[str, list[Any]] = Field(default_factory=dict)
     sweep_mode: Literal["grid", "one_at_a_time"] = Field(
         "grid", description="grid: every combination of the sweep values; one_at_a_time: the first value of "

@@ -154,6 +154,19 @@ def test_a_chain_that_reads_files_needs_inputs(small_config):
         build_experiment(small_config)
 
 
+@pytest.mark.parametrize("inputs, message", [
+    ({"mesh": ["a.off"]}, r"^inputs\.mesh: unknown kind of input 'mesh'; known kinds of input: images, meshes, pairs, "
+                          r"pairs_csv$"),
+    ({"meshes": "a.off"}, r"^inputs\.meshes: Input should be a valid array, got 'a.off'$"),
+    ({"pairs": [{"fixed": "a.png"}]}, r"^inputs\.pairs\[0\]\.moving: Field required$"),
+    ({"pairs_csv": {"path": "p.csv", "fixed_col": "f"}}, r"^inputs\.pairs_csv\.fixed_col: unknown key"),
+])
+def test_inputs_are_checked_by_the_kind_that_each_key_names(small_config, inputs, message):
+    small_config["inputs"] = inputs
+    with pytest.raises(ConfigError, match=message):
+        build_experiment(small_config)
+
+
 @pytest.mark.parametrize("executor, message", [
     ({"kind": "local", "address": "tcp://h:8786"}, r"^executor\.address \(--address\) applies only to the dask executor"),
     ({"address": "tcp://h:8786"}, r"^executor\.address .*the executor is local"),

@@ -16,9 +16,8 @@ import pytest
 
 from tests_paths import REPO_ROOT
 from topomatch.pipeline import registry
-from topomatch.pipeline.contract import StageSpec
 from topomatch.pipeline.errors import ConfigError
-from topomatch.pipeline.registry import REPORTS, describe_params, discover, get_report, get_stage
+from topomatch.pipeline.registry import REPORTS, describe_params, discover, get_input, get_report, get_stage
 
 MINIMAL_PARAMS = {"decimate": {"ratio": 0.5}, "decimate_crosscheck": {"ratio": 0.5}}
 FOUNDATION_STAGES = {"load", "clean", "decimate", "decimate_crosscheck", "noise", "transform", "measures"}
@@ -115,10 +114,10 @@ def test_entry_points_and_decorators_agree():
     marked = {group: {} for group in registry.GROUPS.values()}
     for name in registry.builtin_modules():
         for spec in registry.marked(importlib.import_module(name)):
-            kind = "stage" if isinstance(spec, StageSpec) else "report"
-            marked[registry.GROUPS[kind]][spec.name] = f"{spec.func.__module__}:{spec.func.__qualname__}"
+            marked[registry.GROUPS[registry.spec_kind(spec)]][spec.name] = f"{spec.func.__module__}:{spec.func.__qualname__}"
     assert pyproject_entry_points() == marked
     assert len(marked["topomatch.stages"]) >= 30 and len(marked["topomatch.reports"]) >= 20
+    assert set(marked["topomatch.inputs"]) == {"meshes", "images", "pairs", "pairs_csv"}
 
 
 def test_a_third_party_distribution_is_found_without_registering(installed):
@@ -128,6 +127,36 @@ def test_a_third_party_distribution_is_found_without_registering(installed):
     assert spec.func is sys.modules["acme_stages"].count
     assert registry.declared("stage")["acme_count"][0].dist.name == "acme"
     assert "acme_count" in discover()  # `topomatch stages` lists it too
+
+
+INPUT_PLUGIN = """
+from topomatch.pipeline.contract import input_kind
+
+
+@input_kind("acme_list", schema=str, provides=("path",))
+def mesh_list(listing, files):
+    \"\"\"Test plug-in input kind: a text file naming one mesh per line.\"\"\"
+    table = files.one(listing, "inputs.acme_list")
+    names = [line.strip() for line in table.read_text().splitlines() if line.strip()]
+    return files.each(names, "inputs.acme_list")
+"""
+
+
+def test_a_third_party_input_kind_is_a_key_under_inputs(installed, tmp_path):
+    """A distribution declares a kind of input as it declares stages; the engine knows no kind by name."""
+    from topomatch.pipeline.experiment import build_experiment
+    from topomatch.pipeline.paths import BUNDLED_DIR
+
+    (installed / "acme_inputs.py").write_text(INPUT_PLUGIN)
+    write_distribution(installed, "acme", {"topomatch.inputs": {"acme_list": "acme_inputs:mesh_list"}})
+    (tmp_path / "list.txt").write_text(f"{BUNDLED_DIR}/meshes/torus.off\n\n{BUNDLED_DIR}/meshes/eight_genus2.off\n")
+    config = {"name": "acme", "inputs": {"acme_list": "list.txt"}, "stages": ["load", "measures"]}
+    experiment = build_experiment(config, source=tmp_path / "acme.yaml")
+    assert [u.primary.name for u in experiment.inputs] == ["torus.off", "eight_genus2.off"]
+    assert [u.label for u in experiment.inputs] == ["{bundled}/meshes/torus.off", "{bundled}/meshes/eight_genus2.off"]
+    assert get_input("acme_list").provides == ("path",)
+    with pytest.raises(ConfigError, match=r"acme\.yaml: inputs\.acme_list: Input should be a valid string, got \['list.txt'\]"):
+        build_experiment({**config, "inputs": {"acme_list": ["list.txt"]}}, source=tmp_path / "acme.yaml")
 
 
 def test_a_name_declared_by_two_distributions_is_an_error_naming_both(installed):

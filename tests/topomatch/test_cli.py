@@ -32,8 +32,10 @@ def test_stages_lists_every_stage_with_params():
     assert {"load", "clean", "decimate", "noise", "transform", "measures"} <= set(listing["stages"])
     noise = {p["name"]: p for p in listing["stages"]["noise"]["params"]}
     assert noise["sigma"]["type"] == "float"
+    assert listing["inputs"]["pairs"]["provides"] == ["fixed_path", "moving_path", "truth"]
+    assert listing["inputs"]["meshes"]["type"] == "list[str]"
     text = topomatch("stages").stdout
-    assert "decimate" in text and "relative_to" in text
+    assert "decimate" in text and "relative_to" in text and "  pairs_csv: PairsCsvConfig | None" in text
 
 
 def test_missing_config_file(tmp_path):

@@ -124,27 +124,32 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_stages(args: argparse.Namespace) -> int:
-    from topomatch.pipeline.registry import REPORTS, describe_params, discover
+    from topomatch.pipeline.registry import INPUTS, REPORTS, describe_params, discover, model_in, type_label
 
     stages = discover()
 
-    def params(spec) -> list[dict]:
-        return [dict(zip(("name", "type", "default", "description"), row)) for row in describe_params(spec.params)]
+    def params(model) -> list[dict]:
+        return [dict(zip(("name", "type", "default", "description"), row)) for row in describe_params(model)] \
+            if model is not None else []
 
     listing = {
         "stages": {name: {"version": s.version, "consumes": list(s.consumes), "produces": list(s.produces),
-                          "doc": s.doc, "params": params(s)} for name, s in sorted(stages.items())},
-        "reports": {name: {"doc": r.doc, "params": params(r)} for name, r in sorted(REPORTS.items())},
+                          "doc": s.doc, "params": params(s.params)} for name, s in sorted(stages.items())},
+        "reports": {name: {"doc": r.doc, "params": params(r.params)} for name, r in sorted(REPORTS.items())},
+        "inputs": {name: {"doc": i.doc, "type": type_label(i.schema), "provides": list(i.provides),
+                          "params": params(model_in(i.schema))} for name, i in sorted(INPUTS.items())},
     }
     if args.json:
         print_json(listing, indent=2, default=str)
         return 0
-    for kind in ("stages", "reports"):
-        print(f"{kind.upper()}")
+    for kind in ("stages", "reports", "inputs"):
+        print(f"{kind.upper()}" + (" (keys under a config's inputs:)" if kind == "inputs" else ""))
         for name, info in listing[kind].items():
             flow = ""
             if kind == "stages":
                 flow = f"  (v{info['version']}; {', '.join(info['consumes'])} -> {', '.join(info['produces']) or '-'})"
+            elif kind == "inputs":
+                flow = f": {info['type']}  (-> {', '.join(info['provides'])})"
             print(f"  {name}{flow}\n      {info['doc']}")
             for p in info["params"]:
                 default = "required" if str(p["default"]) == "PydanticUndefined" else f"default {p['default']!r}"
