@@ -21,6 +21,13 @@ row by row (path, method, status, descriptor bytes) and evaluates both (``topoma
 mAP ...), which must be identical. The numbers go to ``benchmarks/results/cluster_index_memory.json`` under
 ``<tag>-<n>`` (``--tag``: default ``after``).
 
+``--config PATH`` measures a config ``run`` instead of ``index`` (the issue's other case: "the client peaked
+at 379 MB for 40 meshes"): the config (e.g. ``configs/retrieval/watertight.yaml``, its reports included) with
+``inputs`` replaced by the chosen meshes, run by ``topomatch run CONFIG --executor dask --address A --json``;
+``--local`` runs it again with the local executor into a second run folder with a cache of its own and compares
+the two ``results.csv`` tables (every column but the timings and the per-item cache flags) and the report
+tables. The record is ``<tag>-run-<config stem>-<n>``.
+
 ``--sqlite ROWS`` measures instead how fast the index's rows can be written (the choice of docs/cluster.md):
 one writer on the client committing each row as it arrives (``ShapeIndex.put``, as ``topomatch index`` did
 before), the same committing at most once a second (as it does now: ``put(commit=False)``, ``commit()``), and
@@ -119,6 +126,38 @@ class Cluster:
             except ProcessLookupError:
                 pass
             proc.wait()
+
+
+def run_config(config: Path, meshes: list[Path], scratch: Path) -> Path:
+    """``config`` with its inputs replaced by ``meshes`` (absolute paths), written into ``scratch``."""
+    import yaml
+
+    data = yaml.safe_load(config.read_text())
+    data["inputs"] = {"meshes": [str(m) for m in meshes]}
+    path = scratch / config.name
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+#: results.csv columns that differ between two runs of the same science: timings and cache flags.
+_RUN_DEPENDENT = ("seconds", "cached", "time", "worker")
+
+
+def same_run_tables(a: Path, b: Path) -> dict:
+    """Compare two run folders' tables (``tables/*.csv``): every column but the timings and cache flags."""
+    out = {}
+    for table in sorted((a / "tables").glob("*.csv")):
+        other = b / "tables" / table.name
+        if not other.is_file():
+            out[table.name] = "missing in the second run"
+            continue
+        rows = []
+        for path in (table, other):
+            with open(path, newline="") as fh:
+                rows.append([{k: v for k, v in row.items() if not any(w in k for w in _RUN_DEPENDENT)}
+                             for row in csv.DictReader(fh)])
+        out[table.name] = rows[0] == rows[1]
+    return out
 
 
 def client_run(argv: list[str], env: dict[str, str], cwd: Path) -> dict:
@@ -228,6 +267,7 @@ def main() -> None:
     p.add_argument("--local", action="store_true", help="also index with the local executor and compare")
     p.add_argument("--keep", action="store_true", help="keep the scratch folder")
     p.add_argument("--sqlite", type=int, metavar="ROWS", help="only measure the index writers (see above)")
+    p.add_argument("--config", type=Path, help="measure `topomatch run CONFIG` on the chosen meshes (see above)")
     args = p.parse_args()
     if args.sqlite:
         with tempfile.TemporaryDirectory(prefix="cluster-index-sqlite-") as scratch:
@@ -244,30 +284,40 @@ def main() -> None:
     code = args.code.resolve()
     env = {**os.environ, "PYTHONPATH": str(code), "OMP_NUM_THREADS": "1"}
     env.pop("DASK_SCHEDULER_ADDRESS", None)
-    common = ["index", *map(str, meshes), "--labels", str(folder / "labels.csv"), "--method", args.method,
-              "--json", "--no-progress", "-q"]
-    record: dict = {"n": len(meshes), "method": args.method, "workers": args.workers, "code": str(code),
+    if args.config:
+        common = ["run", str(run_config(args.config.resolve(), meshes, scratch)), "--json", "--no-progress", "-q"]
+        target = {"dask": ["--out", str(scratch / "dask-runs")], "local": ["--out", str(scratch / "local-runs")]}
+    else:
+        common = ["index", *map(str, meshes), "--labels", str(folder / "labels.csv"), "--method", args.method,
+                  "--json", "--no-progress", "-q"]
+        target = {"dask": ["--db", str(scratch / "dask.db")], "local": ["--db", str(scratch / "local.db")]}
+    record: dict = {"n": len(meshes), "method": args.method, "config": args.config and str(args.config),
+                    "workers": args.workers, "code": str(code),
                     "commit": _commit(code), "python": platform.python_version(),
                     "load_before": os.getloadavg()[0]}
     try:
         (scratch / "cluster").mkdir()
         cluster = Cluster(scratch / "cluster", args.workers, env)
         try:
-            run = client_run([*common, "--db", str(scratch / "dask.db"), "--executor", "dask", "--address",
-                              cluster.address], env, scratch)
+            run = client_run([*common, *target["dask"], "--executor", "dask", "--address", cluster.address], env,
+                             scratch)
             peaks = cluster.peaks_mb()
         finally:
             cluster.stop()
         record["dask"] = {**{k: v for k, v in run.items() if k != "json"}, "scheduler_peak_mb": round(peaks[0], 1),
                           "worker_peaks_mb": [round(x, 1) for x in peaks[1:]],
                           "indexed": [part.get("indexed") for part in run["json"].get("parts", [])],
-                          "failed": run["json"].get("n_failed", run["json"].get("error"))}
+                          "failed": run["json"].get("n_failed", run["json"].get("error")),
+                          "summary": {k: run["json"].get(k) for k in ("n_items", "n_failed", "report_errors")}}
         print(f"dask: client peak {run['client_peak_mb']} MB, {run['seconds']} s, rc {run['rc']}", flush=True)
         if args.local:
-            local = client_run([*common, "--db", str(scratch / "local.db"), "--workers", str(args.workers)], env,
-                               scratch)
+            local = client_run([*common, *target["local"], "--workers", str(args.workers)], env, scratch)
             record["local"] = {k: v for k, v in local.items() if k != "json"}
             print(f"local: client peak {local['client_peak_mb']} MB, {local['seconds']} s", flush=True)
+        if args.local and args.config:
+            record["identical"] = same_run_tables(Path(run["json"]["run_dir"]), Path(local["json"]["run_dir"]))
+            print(f"tables identical: {record['identical']}", flush=True)
+        elif args.local:
             a, b = rows_of(scratch / "dask.db"), rows_of(scratch / "local.db")
             record["rows"] = len(a)
             record["rows_identical"] = a == b
@@ -288,7 +338,7 @@ def main() -> None:
             shutil.rmtree(scratch, ignore_errors=True)
     record["load_after"] = os.getloadavg()[0]
     results = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
-    results[f"{args.tag}-{len(meshes)}"] = record
+    results[f"{args.tag}-run-{args.config.stem}-{len(meshes)}" if args.config else f"{args.tag}-{len(meshes)}"] = record
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps(results, indent=2) + "\n")
     print(json.dumps(record, indent=2))
