@@ -86,7 +86,9 @@ def stage(name: str, *, params: type[Params], version: int, consumes: tuple[str,
 
 @dataclass
 class ReportOutput:
-    """Tables (name -> rows) and figures (name -> matplotlib Figure) of one report, notes, files
+    """Tables (name -> rows) and figures (name -> matplotlib Figure, or a function of no arguments that draws
+    one: the engine calls it when it writes the figure and closes each figure once written, so a report with
+    many heavy figures holds one at a time) of one report, notes, files
     (path relative to the run folder -> bytes, e.g. exported meshes) and HTML fragments for the
     run page (self-contained: an interactive view, whose scripts the page loads from ``assets``)."""
 

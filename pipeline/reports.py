@@ -113,31 +113,37 @@ def report_key(experiment, label: str, call, results) -> str:
     return hashlib.sha256(payload.encode()).hexdigest()
 
 
-def run_reports(experiment, results, *, reuse: dict[str, tuple[str, WrittenReport]] | None = None,
-                run_dir: Path | None = None) -> tuple[dict[str, ReportOutput | str], dict[str, WrittenReport], dict[str, str]]:
-    """Run each configured report; a failing report is recorded as its error message.
+def run_reports(experiment, results, run_dir: Path, *, reuse: dict[str, tuple[str, WrittenReport]] | None = None,
+                figure_format: tuple[str, ...] | list[str] = ("png",), dpi: int = 150,
+                ) -> tuple[dict[str, WrittenReport], list[str], dict[str, str]]:
+    """Run each configured report and write its outputs into ``run_dir`` before the next one runs (one report's
+    figures in memory at a time); a failing report is recorded as its error message.
 
     ``reuse``: {label: (key, what it wrote)} of the run folder's previous manifest; a report whose key is
-    unchanged and whose files are all still in ``run_dir`` is not drawn again. Returns (outputs to write,
-    reused {label: what it wrote}, {label: key})."""
+    unchanged and whose files are all still in ``run_dir`` is not drawn again. Returns ({label: what it wrote},
+    the labels reused, {label: key})."""
     import matplotlib
 
     matplotlib.use("Agg")
-    outputs: dict[str, ReportOutput | str] = {}
-    reused: dict[str, WrittenReport] = {}
+    written: dict[str, WrittenReport] = {}
+    reused: list[str] = []
     keys: dict[str, str] = {}
     for label, call in report_labels(experiment):
         keys[label] = key = report_key(experiment, label, call, results)
         before = (reuse or {}).get(label)
-        if before and before[0] == key and run_dir is not None and _all_present(run_dir, before[1]):
-            reused[label] = before[1]
+        if before and before[0] == key and _all_present(run_dir, before[1]):
+            written[label] = before[1]
+            reused.append(label)
             continue
         spec = get_report(call.name)
         try:
-            outputs[label] = spec.func(experiment, results, call.params)
+            out = spec.func(experiment, results, call.params)
         except Exception as exc:  # keep the other reports and the computed results
-            outputs[label] = f"report {label} failed: {type(exc).__name__}: {exc}"
-    return outputs, reused, keys
+            written[label] = WrittenReport(error=f"report {label} failed: {type(exc).__name__}: {exc}")
+            continue
+        written[label] = write_report_output(run_dir, label, out, figure_format=figure_format, dpi=dpi)
+        del out
+    return written, reused, keys
 
 
 def _all_present(run_dir: Path, record: WrittenReport) -> bool:
@@ -176,36 +182,38 @@ def _relative_file(run_dir: Path, relative: str) -> Path:
     return path
 
 
-def write_report_outputs(run_dir: Path, outputs: dict[str, ReportOutput | str], *,
-                         figure_format: tuple[str, ...] | list[str] = ("png",), dpi: int = 150) -> dict[str, WrittenReport]:
-    """Write every table, figure (in each of ``figure_format``, raster ones at ``dpi``), file and
-    interactive view; return {report label: what it wrote} (an output that is a string is the report's error)."""
+def write_report_output(run_dir: Path, label: str, out: ReportOutput, *,
+                        figure_format: tuple[str, ...] | list[str] = ("png",), dpi: int = 150) -> WrittenReport:
+    """Write one report's tables, figures (in each of ``figure_format``, raster ones at ``dpi``; a figure given
+    as a function is drawn here, and each figure is closed once written), files and interactive views; return
+    what it wrote. A figure that fails to draw is the report's error, the rest is written."""
     import matplotlib.pyplot as plt
 
-    written: dict[str, WrittenReport] = {}
-    for label, out in outputs.items():
-        if isinstance(out, str):
-            written[label] = WrittenReport(error=out)
-            continue
-        paths = []
-        for name, rows in out.tables.items():
-            paths += [str(Path(p).relative_to(run_dir)) for p in write_table(run_dir / "tables", name, rows)]
-        for name, fig in out.figures.items():
+    paths, errors = [], []
+    for name, rows in out.tables.items():
+        paths += [str(Path(p).relative_to(run_dir)) for p in write_table(run_dir / "tables", name, rows)]
+    for name in list(out.figures):
+        fig = out.figures.pop(name)
+        try:
+            fig = fig() if callable(fig) else fig
             for fmt in figure_format:
                 buf = io.BytesIO()
                 fig.savefig(buf, format=fmt, dpi=dpi, bbox_inches="tight")
                 atomic_write_bytes(run_dir / "figures" / f"{name}.{fmt}", buf.getvalue())
                 paths.append(f"figures/{name}.{fmt}")
-            plt.close(fig)
-        for relative, data in out.files.items():
-            atomic_write_bytes(_relative_file(run_dir, relative), data)
-            if not relative.startswith(f"{ASSETS_DIR}/"):
-                paths.append(relative)
-        for name, fragment in out.html.items():
-            atomic_write_text(run_dir / "views" / f"{name}.html", _view_page(run_dir, name, fragment))
-            paths.append(f"views/{name}.html")
-        written[label] = WrittenReport(tuple(paths), tuple(out.notes))
-    return written
+        except Exception as exc:  # keep the report's other outputs
+            errors.append(f"report {label} failed to draw {name}: {type(exc).__name__}: {exc}")
+        finally:
+            if not callable(fig):
+                plt.close(fig)
+    for relative, data in out.files.items():
+        atomic_write_bytes(_relative_file(run_dir, relative), data)
+        if not relative.startswith(f"{ASSETS_DIR}/"):
+            paths.append(relative)
+    for name, fragment in out.html.items():
+        atomic_write_text(run_dir / "views" / f"{name}.html", _view_page(run_dir, name, fragment))
+        paths.append(f"views/{name}.html")
+    return WrittenReport(tuple(paths), tuple(out.notes), "; ".join(errors) or None)
 
 
 # --------------------------------------------------------------------------- the run page

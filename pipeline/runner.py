@@ -34,7 +34,6 @@ from topomatch.pipeline.reports import (
     run_reports,
     write_index_html,
     WrittenReport,
-    write_report_outputs,
     write_table,
 )
 from tqdm import tqdm
@@ -117,9 +116,8 @@ def run_experiment(
     compute_seconds = time.perf_counter() - t0
 
     write_table(run_dir / "tables", "results", [r.row() for r in results])
-    outputs, reused, report_keys = run_reports(experiment, results, reuse=_previous_reports(run_dir), run_dir=run_dir)
-    drawn = write_report_outputs(run_dir, outputs, figure_format=experiment.raw.figure_format, dpi=experiment.raw.dpi)
-    written = {label: reused[label] if label in reused else drawn[label] for label in report_keys}
+    written, reused, report_keys = run_reports(experiment, results, run_dir, reuse=_previous_reports(run_dir),
+                                               figure_format=experiment.raw.figure_format, dpi=experiment.raw.dpi)
     manifest = build_manifest(
         experiment, results, started=started, compute_seconds=compute_seconds,
         total_seconds=time.perf_counter() - t0, cache_root=cache_root,

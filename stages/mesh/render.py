@@ -42,11 +42,18 @@ def face_colors(V: np.ndarray, F: np.ndarray, *, values: np.ndarray | None = Non
 
 
 def draw_mesh(ax, mesh: Mesh, *, values: np.ndarray | None = None, cmap: str = "viridis",
-              color=(0.75, 0.78, 0.85), elev: float = 20.0, azim: float = -60.0, alpha: float = 1.0) -> None:
-    """Draw ``mesh`` on a 3D axis, shaded; ``values`` (n,) colours it by a vertex function."""
+              color=(0.75, 0.78, 0.85), elev: float = 20.0, azim: float = -60.0, alpha: float = 1.0,
+              max_faces: int | None = None) -> None:
+    """Draw ``mesh`` on a 3D axis, shaded; ``values`` (n,) colours it by a vertex function. ``max_faces``: a
+    plain-coloured mesh with more faces is drawn decimated to about that many (a thumbnail: matplotlib keeps
+    every face of every panel as a path, about 1 KB each, until the figure is closed)."""
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     V, F = mesh.V, mesh.F
+    if max_faces is not None and values is None and len(F) > max_faces:
+        from topomatch.stages.mesh.decimate import simplify_to_target
+
+        V, F, _ = simplify_to_target(V, F, max_faces)
     rgb = face_colors(V, F, values=values, cmap=cmap, color=color)
     poly = Poly3DCollection(V[F], facecolors=rgb, edgecolors="none", linewidths=0, alpha=alpha)
     ax.add_collection3d(poly)

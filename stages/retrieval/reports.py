@@ -19,6 +19,7 @@ metrics (:mod:`topomatch.stages.retrieval.metrics`), and writes:
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 from pathlib import Path
 
 from typing import Annotated, Literal
@@ -30,6 +31,9 @@ from topomatch.pipeline.contract import ConfigError, Params, ReportOutput, repor
 from topomatch.stages.retrieval.catalogue import DEFAULT_METHOD, METHODS, Method, get_method
 from topomatch.stages.retrieval.fusion import Fusion
 from topomatch.stages.retrieval.labels import read_labels
+
+#: Faces of a rendered thumbnail (1.3 inches across): meshes with more are drawn decimated.
+THUMBNAIL_FACES = 1500
 
 
 class MethodsParams(Params):
@@ -170,9 +174,10 @@ def retrieval_benchmark_report(experiment, results, params: RetrievalBenchmarkPa
         if params.thumbnails and (params.thumbnail_methods is None or method in params.thumbnail_methods):
             queries = [first_of[c] for c in params.queries if c in first_of and first_of[c] in where]
             for k in params.top_k:
-                out.figures[f"{params.name}_top{k}_{method}"] = _top_k_grid(items, y, D, kept, where, queries, method, k)
+                out.figures[f"{params.name}_top{k}_{method}"] = partial(_top_k_grid, items, y, D, kept, where, queries,
+                                                                        method, k)  # drawn when written
     if params.thumbnails and params.samples_per_class:
-        out.figures[f"{params.name}_samples"] = _class_samples(items, y, params.samples_per_class)
+        out.figures[f"{params.name}_samples"] = partial(_class_samples, items, y, params.samples_per_class)
     out.tables[f"{params.name}_metrics"] = metric_rows
     if ablation:
         out.tables[f"{params.name}_ablation"] = ablation
@@ -226,7 +231,7 @@ def _top_k_grid(items, y, D, kept, where, queries, method, k):
         for col, i in enumerate([q] + order):
             ax = fig.add_subplot(len(queries), k + 1, row * (k + 1) + col + 1, projection="3d")
             hit = y[i] == y[q]
-            draw_mesh(ax, items[i].final("mesh"),
+            draw_mesh(ax, items[i].final("mesh"), max_faces=THUMBNAIL_FACES,
                       color=(0.55, 0.6, 0.75) if col == 0 else ((0.6, 0.8, 0.6) if hit else (0.85, 0.55, 0.55)))
             ax.set_title(("query: " if col == 0 else f"{col}. ") + str(y[i]), fontsize=6,
                          color="black" if col == 0 or hit else "#b00")
@@ -254,7 +259,7 @@ def _class_samples(items, y, n):
     fig = plt.figure(figsize=(columns * 1.3, rows * 1.5 + 0.75))
     for k, i in enumerate(picks):
         ax = fig.add_subplot(rows, columns, k + 1, projection="3d")
-        draw_mesh(ax, items[i].final("mesh"), color=(0.6, 0.65, 0.8))
+        draw_mesh(ax, items[i].final("mesh"), color=(0.6, 0.65, 0.8), max_faces=THUMBNAIL_FACES)
         ax.set_title(f"{y[i]} {Path(items[i].input_path).name.split('.')[0]}", fontsize=6)
     _title_above(fig, f"{n} models of each of the {len(dict.fromkeys(y))} classes")
     return fig

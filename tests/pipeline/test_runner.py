@@ -13,7 +13,7 @@ import pytest
 from pydantic import Field
 
 from topomatch.pipeline.config import build_experiment
-from topomatch.pipeline.contract import Params, StageResult, stage
+from topomatch.pipeline.contract import Params, ReportOutput, StageResult, report, stage
 from topomatch.pipeline.registry import STAGES, discover, register_module
 from topomatch.pipeline import reports
 from topomatch.pipeline.runner import run_experiment
@@ -95,6 +95,22 @@ def test_a_run_folder_of_the_previous_release_is_read(small_config, tmp_path):
     assert "<p>drawn by 0.1.0</p>" in page and "all 4 items ok</span></dd>" in page
 
 
+def test_figures_drawn_when_written_are_closed_and_one_that_fails_is_the_reports_error(small_config, tmp_path):
+    """A report may give a figure as a function: it is drawn when the engine writes it, then closed; one that
+    fails to draw is recorded as the report's error and its other outputs are written (the run goes on)."""
+    import matplotlib.pyplot as plt
+
+    small_config["reports"] = ["test_lazy_figures", {"table": {"name": "names", "columns": ["item"]}}]
+    DRAWN.clear()
+    outcome = _run(small_config, tmp_path)
+    record = outcome.manifest["outputs"]["test_lazy_figures"]
+    assert DRAWN == ["first", "broken"]
+    assert record["files"] == ["tables/lazy.csv", "tables/lazy.json", "figures/first.png", "figures/eager.png"]
+    assert record["error"] == ("report test_lazy_figures failed to draw broken: ValueError: no data to draw")
+    assert all((outcome.run_dir / f).is_file() for f in record["files"])
+    assert outcome.manifest["outputs"]["table"]["error"] is None and plt.get_fignums() == []
+
+
 def test_changed_param_recomputes_only_downstream(small_config, tmp_path):
     _run(small_config, tmp_path)
     small_config["stages"][2] = {"noise": {"sigma": 0.0, "relative_to": "bbox_diagonal", "seed": 4}}
@@ -147,6 +163,27 @@ def _killing_stage(mesh, *, params):
     if mesh.name == params.fail_on:
         os.kill(os.getpid(), signal.SIGKILL)
     return _BoomResult(mesh.name)
+
+
+DRAWN: list[str] = []
+
+
+@report("test_lazy_figures", params=Params)
+def _lazy_figures_report(experiment, results, params):
+    """Test report: two figures drawn when written (one fails), one made at once, a table."""
+    import matplotlib.pyplot as plt
+
+    def draw(name):
+        DRAWN.append(name)
+        if name == "broken":
+            raise ValueError("no data to draw")
+        fig, ax = plt.subplots()
+        ax.plot([0, 1], [0, len(results)])
+        return fig
+
+    eager, _ = plt.subplots()
+    return ReportOutput(tables={"lazy": [{"n": len(results)}]},
+                        figures={"first": lambda: draw("first"), "broken": lambda: draw("broken"), "eager": eager})
 
 
 register_module(sys.modules[__name__])
