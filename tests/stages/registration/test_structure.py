@@ -138,6 +138,25 @@ def test_an_outline_only_pair_is_registered_at_order_one_where_jt_jr_tmi_are_one
         np.testing.assert_allclose(reg.transform.parameters, jt.transform.parameters, atol=1e-8)
 
 
+def test_either_detector_makes_a_pair_outline_only_and_both_off_make_it_ordinary(pd_slice):
+    """PD slice against its own silhouette: with ``min_structure`` 0 the spread test alone finds the
+    silhouette (its spread ~0, recorded) and the pair is registered at order 1 to half a pixel; with both
+    tests off it is an ordinary pair (order 2, no outline measures)."""
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform, target_registration_error
+
+    truth = RigidTransform.euler2d(-5.0, 3.0, -4.0, pd_slice.center)
+    moving = moved(_silhouette(pd_slice), truth, noise=0.02, rng=np.random.default_rng(3))
+    spread_only = register(pd_slice, moving, RegisterParams.model_validate({"check": {"min_structure": 0}}))
+    assert spread_only.measures["spread_moving"] < 0.05 < spread_only.measures["spread_fixed"]
+    assert spread_only.measures["outline_alpha"] == 1.0
+    assert target_registration_error(spread_only.transform, truth, pd_slice.points()).mean() < 0.5
+    off = register(pd_slice, moving, RegisterParams.model_validate({"check": {"min_structure": 0, "min_spread": 0}}))
+    assert not any(k.startswith(("spread", "structure", "outline")) for k in off.measures)
+
+
 def test_an_ordinary_pair_ignores_the_outline_settings_and_level_smoothing_blurs_the_level(pd_slice):
     """T1 against PD has structure inside: the outline settings change nothing (bit-identical results with them
     off); a level's ``smoothing`` is a Gaussian of that many of its own pixels on both block-averaged images."""
