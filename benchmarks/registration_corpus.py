@@ -99,9 +99,15 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   once: the numbers this project reported until outline-only pairs got their own measure order and smoothing
   (issue 30: chosen on ``tune`` and ``dev``, never on ``final``, whose results had been seen): seen.
 - ``final2``: drawn after that change, the same sources, kinds and frames as ``final``, fresh seeds, run
+  once: the numbers this project reported until a second outline-only test (``check.min_spread``: a mask
+  or silhouette whose outline is too intricate for ``interior_structure``) was added, chosen on ``tune``
+  and on the outline attack, never on ``final2``: seen.
+- ``final3``: drawn after that change, the same sources, kinds and frames as ``final2``, fresh seeds, run
   once: the numbers this project reports now.
 
-``--cases-scale`` scales every count.
+``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
+that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
+left out of every count.
 
 Methods (all in one process, one case after the other, each with its library defaults and thread count):
 ``ours-<metric>`` = ``topomatch.register(fixed_path, moving_path, metric=m)`` (time: the call's wall time,
@@ -140,6 +146,7 @@ from typing import Callable
 import numpy as np
 from scipy import ndimage
 
+from topomatch.pipeline.errors import InputError
 from topomatch.stages.registration.evaluate import tre_points
 from topomatch.stages.registration.image import Image, otsu_threshold
 from topomatch.stages.registration.interpolation import resample
@@ -165,6 +172,8 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
               2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final2": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final3": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+               2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
@@ -174,7 +183,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "confirm": ("t1", "t2", "labels", "silhouette", "inverted", "gamma"),
          "holdout": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         "final2": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
+         "final2": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "final3": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
@@ -196,9 +206,12 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final", "mni-sagittal", 2): 6502, ("final", "itk", 2): 6602,
          ("final2", "mni", 3): 7103, ("final2", "mni15", 3): 7703, ("final2", "kmeans", 3): 7203,
          ("final2", "anatomical", 3): 7303, ("final2", "mni-axial", 2): 7102, ("final2", "mni-coronal", 2): 7402,
-         ("final2", "mni-sagittal", 2): 7502, ("final2", "itk", 2): 7602}
+         ("final2", "mni-sagittal", 2): 7502, ("final2", "itk", 2): 7602,
+         ("final3", "mni", 3): 8103, ("final3", "mni15", 3): 8703, ("final3", "kmeans", 3): 8203,
+         ("final3", "anatomical", 3): 8303, ("final3", "mni-axial", 2): 8102, ("final3", "mni-coronal", 2): 8402,
+         ("final3", "mni-sagittal", 2): 8502, ("final3", "itk", 2): 8602}
 
-SPLIT_ORDER = {"tune": 0, "dev": 1, "report": 2, "confirm": 3, "holdout": 4, "final": 5, "final2": 6}
+SPLIT_ORDER = {"tune": 0, "dev": 1, "report": 2, "confirm": 3, "holdout": 4, "final": 5, "final2": 6, "final3": 7}
 SWAPPABLE = ("labels", "silhouette")
 TISSUES = ("csf", "gm", "wm")
 T2_VALUES = (1.0, 0.45, 0.30)
@@ -434,7 +447,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
-    frames = ["as-is", "crop", "pad"] + (["tight"] if split in ("confirm", "holdout", "final", "final2") else [])
+    frames = ["as-is", "crop", "pad"] + (["tight"] if split in ("confirm", "holdout", "final", "final2", "final3") else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     crop_fractions, crop_starts = rng.uniform(0.7, 0.9, size=2), rng.uniform(size=2)
     if frame == "tight":  # 45-60 % per axis: the brain fills most of the grid's border
@@ -989,7 +1002,12 @@ def run(args) -> None:
         t_start = time.perf_counter()
         for n, spec in enumerate(cases, 1):
             case = build_case(spec)
-            fp, mp, fixed, moving = write_case(case, folder)
+            try:
+                fp, mp, fixed, moving = write_case(case, folder)
+            except InputError as exc:  # a draw with nothing to register (a crop window off the object): not a case
+                out.setdefault("invalid", {})[spec.id] = str(exc)
+                print(f"[{n}/{len(cases)}] {spec.id} {spec.kind}: not a case ({exc})", flush=True)
+                continue
             parts = []
             for name, runner in runners.items():
                 row = score(case, fixed, name, runner(fp, mp, fixed, moving))

@@ -26,7 +26,7 @@ from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from topomatch.stages.registration.structure import interior_structure, outline_gap
+from topomatch.stages.registration.structure import interior_spread, interior_structure, outline_gap
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -168,7 +168,7 @@ class _Run:
         self.center = fixed.center
         self.mask = mask
         self.structures = self._structures()
-        self.outline_only = any(v < params.check.min_structure for v in self.structures.values())
+        self.outline_only = self._outline_only()
         self.metric = params.metric.for_outline() if self.outline_only else params.metric
         self.levels = self._pyramid()
         self.radius = rms_radius(fixed, mask)
@@ -190,11 +190,20 @@ class _Run:
         out when NaN: no interior or no outline to judge; none when ``check.min_structure`` is 0). Either below
         ``check.min_structure`` makes the pair outline-only: a mask or silhouette, whose outline is all the
         measure can align (``metric.outline_alpha``, ``outline_smoothing``, :func:`check_outline`)."""
-        if self.params.check.min_structure <= 0:
+        c = self.params.check
+        if c.min_structure <= 0 and c.min_spread <= 0:
             return {}
         values = {f"structure_{role}": interior_structure(image) for role, image in (("fixed", self.fixed),
                                                                                    ("moving", self.moving))}
+        if c.min_spread > 0:
+            values |= {f"spread_{role}": interior_spread(image) for role, image in (("fixed", self.fixed),
+                                                                                 ("moving", self.moving))}
         return {k: v for k, v in values.items() if math.isfinite(v)}
+
+    def _outline_only(self) -> bool:
+        """Either image has less structure than ``check.min_structure`` or less spread than ``check.min_spread``."""
+        c = self.params.check
+        return any(v < (c.min_spread if k.startswith("spread") else c.min_structure) for k, v in self.structures.items())
 
     def _pyramid(self) -> list[_Level]:
         """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images
@@ -543,7 +552,11 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     flat = [f"the {role} image has almost no structure inside its outline (interior gradient {structure:.3f} of "
             f"the outline's; min_structure {c.min_structure:g})"
             for role in ("fixed", "moving") if (structure := run.structures.get(f"structure_{role}", math.nan))
-            < c.min_structure]
+            < c.min_structure] + \
+           [f"the {role} image is almost uniform inside its object (intensity spread {spread:.3f} of its contrast; "
+            f"min_spread {c.min_spread:g})"
+            for role in ("fixed", "moving") if (spread := run.structures.get(f"spread_{role}", math.nan))
+            < c.min_spread]
     gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, RigidTransform(tuple(theta),
                                                                                           tuple(run.center)))
     drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
@@ -555,7 +568,8 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     if not why:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "
-                            f"or set check.min_structure 0 to register it as an ordinary pair")]
+                            f"or set check.min_structure 0 and check.min_spread 0 to register it as an ordinary "
+                            f"pair")]
 
 
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:

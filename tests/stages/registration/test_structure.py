@@ -8,7 +8,7 @@ from scipy import ndimage
 
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.image import gaussian_blur
-from topomatch.stages.registration.structure import fill_holes, interior_structure, outline_gap
+from topomatch.stages.registration.structure import fill_holes, interior_spread, interior_structure, outline_gap
 
 
 @pytest.mark.parametrize("shape", [(40, 50), (20, 25, 30)])
@@ -63,6 +63,31 @@ def test_a_silhouette_has_no_inside_an_image_with_a_pattern_has_one(d):
     assert interior_structure(Image(7.0 * (pattern + 5.0))) == pytest.approx(interior_structure(Image(pattern)))
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_interior_spread_of_two_level_and_one_level_objects(d):
+    """A box whose halves are 1 and 2 on a background of 0 (the grids under 48 pixels: not block-averaged): Otsu
+    keeps both halves, the core's q10, median, q90 are 1, 1.5, 2, so the spread is (2 - 1) / 1.5 = 2/3 whatever the
+    scale; the box at one value scores 0, and so does a comb (one value, an outline full of concavities); a thresholded pattern (dark regions inside the
+    object) is not judged (NaN), nor is an image whose content fills the grid."""
+    shape = (40, 44, 36)[:d]
+    inner = tuple(slice(5, n - 5) for n in shape)
+    box = np.zeros(shape)
+    box[inner] = 1.0
+    halves = box.copy()
+    halves[(slice(5, 5 + (shape[0] - 10) // 2),) + inner[1:]] = 2.0
+    assert interior_spread(Image(halves)) == pytest.approx(2 / 3)
+    assert interior_spread(Image(40.0 * halves + 7.0)) == pytest.approx(2 / 3)
+    assert interior_spread(Image(box)) == 0.0
+    comb = box.copy()
+    for start in range(13, shape[1] - 5, 14):  # teeth 8 pixels wide, gaps of 6 (wider than the closing)
+        comb[(slice(5, shape[0] - 15), slice(start, start + 6)) + inner[2:]] = 0.0
+    assert interior_spread(Image(comb)) == 0.0
+    holes = box.copy()
+    holes[tuple(slice(10, n - 10) for n in shape)] = 0.0  # a dark region inside: not a mask
+    assert np.isnan(interior_spread(Image(holes)))
+    assert np.isnan(interior_spread(Image(np.ones(shape))))
+
+
 def test_a_silhouette_pair_is_flagged_when_its_levels_disagree_and_the_check_can_be_turned_off(pd_slice):
     """``outline_gap 0`` flags every silhouette pair; by default the flag follows the recorded measures (the
     outlines' gap at the result above ``outline_gap``, or the finest level left a coarser level's optimum by
@@ -111,6 +136,25 @@ def test_an_outline_only_pair_is_registered_at_order_one_where_jt_jr_tmi_are_one
     if metric != "jt":
         jt = register(pd_slice, moving, RegisterParams.model_validate({"metric": "jt"}))
         np.testing.assert_allclose(reg.transform.parameters, jt.transform.parameters, atol=1e-8)
+
+
+def test_either_detector_makes_a_pair_outline_only_and_both_off_make_it_ordinary(pd_slice):
+    """PD slice against its own silhouette: with ``min_structure`` 0 the spread test alone finds the
+    silhouette (its spread ~0, recorded) and the pair is registered at order 1 to half a pixel; with both
+    tests off it is an ordinary pair (order 2, no outline measures)."""
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform, target_registration_error
+
+    truth = RigidTransform.euler2d(-5.0, 3.0, -4.0, pd_slice.center)
+    moving = moved(_silhouette(pd_slice), truth, noise=0.02, rng=np.random.default_rng(3))
+    spread_only = register(pd_slice, moving, RegisterParams.model_validate({"check": {"min_structure": 0}}))
+    assert spread_only.measures["spread_moving"] < 0.05 < spread_only.measures["spread_fixed"]
+    assert spread_only.measures["outline_alpha"] == 1.0
+    assert target_registration_error(spread_only.transform, truth, pd_slice.points()).mean() < 0.5
+    off = register(pd_slice, moving, RegisterParams.model_validate({"check": {"min_structure": 0, "min_spread": 0}}))
+    assert not any(k.startswith(("spread", "structure", "outline")) for k in off.measures)
 
 
 def test_an_ordinary_pair_ignores_the_outline_settings_and_level_smoothing_blurs_the_level(pd_slice):
