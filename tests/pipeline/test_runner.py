@@ -102,13 +102,14 @@ def test_figures_drawn_when_written_are_closed_and_one_that_fails_is_the_reports
 
     small_config["reports"] = ["test_lazy_figures", {"table": {"name": "names", "columns": ["item"]}}]
     DRAWN.clear()
+    open_before = plt.get_fignums()  # figures other tests left open
     outcome = _run(small_config, tmp_path)
     record = outcome.manifest["outputs"]["test_lazy_figures"]
     assert DRAWN == ["first", "broken"]
     assert record["files"] == ["tables/lazy.csv", "tables/lazy.json", "figures/first.png", "figures/eager.png"]
     assert record["error"] == ("report test_lazy_figures failed to draw broken: ValueError: no data to draw")
     assert all((outcome.run_dir / f).is_file() for f in record["files"])
-    assert outcome.manifest["outputs"]["table"]["error"] is None and plt.get_fignums() == []
+    assert outcome.manifest["outputs"]["table"]["error"] is None and plt.get_fignums() == open_before
 
 
 def test_changed_param_recomputes_only_downstream(small_config, tmp_path):
