@@ -65,6 +65,16 @@ def object_mask(image: Image) -> np.ndarray:
     return cached
 
 
+def analysed_copy(image: Image) -> Image:
+    """``image`` block-averaged by 2 along axes of at least 48 pixels: the copy :func:`interior_structure` and
+    :func:`interior_spread` analyse (made once per image, so that its :func:`object_mask` is computed once too)."""
+    cached = image.__dict__.get("_analysed_copy")
+    if cached is None:
+        cached = image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
+        object.__setattr__(image, "_analysed_copy", cached)
+    return cached
+
+
 def interior_structure(image: Image) -> float:
     """Mean gradient magnitude inside the object over its mean on the object's outline (unit-free, >= 0).
 
@@ -72,7 +82,7 @@ def interior_structure(image: Image) -> float:
     (:func:`object_mask`), the gradient the copy's smoothed by one pixel; the outline band is :data:`BAND` pixels
     either side of the object's edge, the interior the object eroded by :data:`ERODE`. NaN when either is empty
     (an object smaller than the band, or filling the grid)."""
-    small = image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
+    small = analysed_copy(image)
     obj = object_mask(small)
     unit = (1.0,) * small.dim
     band = grow(obj, BAND, unit) & grow(~obj, BAND, unit)
@@ -97,7 +107,7 @@ def interior_spread(image: Image) -> float:
     misled by an outline with concavities or thin parts). NaN when the content fills the grid, either core
     has fewer than 10 pixels, or less than :data:`SOLID` of the object (:func:`object_mask`) is content: a
     binary image whose object has dark regions inside (a thresholded image) has structure inside, and 0 spread."""
-    small = image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
+    small = analysed_copy(image)
     content = foreground_mask(small)
     unit = (1.0,) * small.dim
     core, back = ~grow(~content, 1.0, unit), ~grow(content, 1.0, unit)
