@@ -193,7 +193,7 @@ def type_label(hint: Any) -> str:
 
 
 def model_in(hint: Any) -> type[Params] | None:
-    """The parameter model a type hint holds (``PairConfig`` in ``list[PairConfig]`` or ``PairConfig | None``)."""
+    """The parameter model a type hint holds (``M`` in ``list[M]`` or ``M | None``), or None."""
     if isinstance(hint, type) and issubclass(hint, Params):
         return hint
     return next((m for m in map(model_in, typing.get_args(hint)) if m is not None), None)
