@@ -150,6 +150,26 @@ def sample_mask(fixed: Image, params: RegisterParams) -> np.ndarray | None:
     return grow(foreground_mask(fixed), params.sampling.margin, fixed.spacing)
 
 
+OUTLINE_TESTS = {
+    "structure": (interior_structure, "has almost no structure inside its outline (interior gradient {:.3f} of the "
+                                      "outline's"),
+    "spread": (interior_spread, "is almost uniform inside its object (intensity spread {:.3f} of its contrast"),
+}
+"""The outline-only tests: name -> (measure of one image, how a flag words a low value: a format string); each
+is compared with ``check.min_<name>`` and is off at 0."""
+
+
+def _below_outline_thresholds(run: "_Run") -> list[tuple[str, float, str, float]]:
+    """(measure key, value, test, threshold) of each recorded outline-only measure below its threshold."""
+    c = run.params.check
+    out = []
+    for key, value in run.structures.items():
+        test = key.partition("_")[0]
+        if value < (limit := getattr(c, f"min_{test}")):
+            out.append((key, value, test, limit))
+    return out
+
+
 @dataclass(frozen=True)
 class _Level:
     spec: LevelSpec
@@ -186,24 +206,18 @@ class _Run:
         self._grid: GridSearch | None = None
 
     def _structures(self) -> dict[str, float]:
-        """``structure_fixed`` / ``structure_moving``: each image's :func:`~.structure.interior_structure` (left
-        out when NaN: no interior or no outline to judge; none when ``check.min_structure`` is 0). Either below
-        ``check.min_structure`` makes the pair outline-only: a mask or silhouette, whose outline is all the
-        measure can align (``metric.outline_alpha``, ``outline_smoothing``, :func:`check_outline`)."""
+        """``<test>_fixed`` / ``<test>_moving`` for each outline-only test whose threshold ``check.min_<test>`` is
+        above 0 (:data:`OUTLINE_TESTS`), left out when NaN (nothing to judge). Either image below a threshold makes
+        the pair outline-only (:meth:`_outline_only`): a mask or silhouette, whose outline is all the measure can
+        align (``metric.outline_alpha``, ``outline_smoothing``, :func:`check_outline`)."""
         c = self.params.check
-        if c.min_structure <= 0 and c.min_spread <= 0:
-            return {}
-        values = {f"structure_{role}": interior_structure(image) for role, image in (("fixed", self.fixed),
-                                                                                   ("moving", self.moving))}
-        if c.min_spread > 0:
-            values |= {f"spread_{role}": interior_spread(image) for role, image in (("fixed", self.fixed),
-                                                                                 ("moving", self.moving))}
+        values = {f"{test}_{role}": measure(image) for test, (measure, _) in OUTLINE_TESTS.items()
+                  if getattr(c, f"min_{test}") > 0 for role, image in (("fixed", self.fixed), ("moving", self.moving))}
         return {k: v for k, v in values.items() if math.isfinite(v)}
 
     def _outline_only(self) -> bool:
         """Either image has less structure than ``check.min_structure`` or less spread than ``check.min_spread``."""
-        c = self.params.check
-        return any(v < (c.min_spread if k.startswith("spread") else c.min_structure) for k, v in self.structures.items())
+        return bool(_below_outline_thresholds(self))
 
     def _pyramid(self) -> list[_Level]:
         """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images
@@ -549,14 +563,8 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     c = run.params.check
     if not run.outline_only:
         return []
-    flat = [f"the {role} image has almost no structure inside its outline (interior gradient {structure:.3f} of "
-            f"the outline's; min_structure {c.min_structure:g})"
-            for role in ("fixed", "moving") if (structure := run.structures.get(f"structure_{role}", math.nan))
-            < c.min_structure] + \
-           [f"the {role} image is almost uniform inside its object (intensity spread {spread:.3f} of its contrast; "
-            f"min_spread {c.min_spread:g})"
-            for role in ("fixed", "moving") if (spread := run.structures.get(f"spread_{role}", math.nan))
-            < c.min_spread]
+    flat = [f"the {key.partition('_')[2]} image {OUTLINE_TESTS[test][1].format(value)}; min_{test} {limit:g})"
+            for key, value, test, limit in _below_outline_thresholds(run)]
     gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, RigidTransform(tuple(theta),
                                                                                           tuple(run.center)))
     drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
