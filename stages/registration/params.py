@@ -162,13 +162,14 @@ class CheckSpec(Params):
                                              "than this (interior over outline gradient, structure.py) is "
                                              "outline-only (a mask, a silhouette): registered with "
                                              "metric.outline_alpha and outline_smoothing, and flagged by "
-                                             "outline_gap and outline_drop (0: no pair is)")
+                                             "outline_gap and outline_drop (0: this test is off; min_spread is "
+                                             "the other)")
     min_spread: float = Field(0.05, ge=0, allow_inf_nan=False,
                               description="a pair in which either image's intensities inside its object spread less "
                                           "than this fraction of the object's contrast (q90 - q10 over the "
                                           "object-background median difference, structure.py) is outline-only too: "
                                           "a mask or silhouette whose outline is too intricate for min_structure "
-                                          "(0: no pair is)")
+                                          "(0: this test is off)")
     outline_gap: float = Field(6.0, ge=0, allow_inf_nan=False,
                                description="such a pair is flagged when the two outlines lie farther apart than this "
                                            "(physical units, mean, compared within 4 fixed pixels of the fixed "
