@@ -103,7 +103,13 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   or silhouette whose outline is too intricate for ``interior_structure``) was added, chosen on ``tune``
   and on the outline attack, never on ``final2``: seen.
 - ``final3``: drawn after that change, the same sources, kinds and frames as ``final2``, fresh seeds, run
-  once: the numbers this project reports now.
+  once: the numbers this project reported until discrete images (label maps, thresholded masks) were measured
+  as outline-only pairs are (``metric.discrete_levels``, chosen on ``edge``; ``final3``'s three silent errors,
+  thresholded small sections, were looked at for the mechanism): seen.
+- ``edge`` (tune side, 2D): sections from the outer 12 % of the brain's extent at either end (the small, low and
+  lateral sections where ``final3``'s silent errors lay), every kind and frame; for choosing, never reported.
+- ``final4``: drawn after the fifth round was chosen on ``edge``, the same design as ``final3``, fresh seeds, run once:
+  the numbers this project reports now.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -174,6 +180,9 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final3": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final4": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+               2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
@@ -184,7 +193,9 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "holdout": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final2": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         "final3": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
+         "final3": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "final4": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
@@ -209,9 +220,17 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final2", "mni-sagittal", 2): 7502, ("final2", "itk", 2): 7602,
          ("final3", "mni", 3): 8103, ("final3", "mni15", 3): 8703, ("final3", "kmeans", 3): 8203,
          ("final3", "anatomical", 3): 8303, ("final3", "mni-axial", 2): 8102, ("final3", "mni-coronal", 2): 8402,
-         ("final3", "mni-sagittal", 2): 8502, ("final3", "itk", 2): 8602}
+         ("final3", "mni-sagittal", 2): 8502, ("final3", "itk", 2): 8602,
+         ("final4", "mni", 3): 9103, ("final4", "mni15", 3): 9703, ("final4", "kmeans", 3): 9203,
+         ("final4", "anatomical", 3): 9303, ("final4", "mni-axial", 2): 9102, ("final4", "mni-coronal", 2): 9402,
+         ("final4", "mni-sagittal", 2): 9502, ("final4", "itk", 2): 9602,
+         ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722}
 
-SPLIT_ORDER = {"tune": 0, "dev": 1, "report": 2, "confirm": 3, "holdout": 4, "final": 5, "final2": 6, "final3": 7}
+SPLIT_ORDER = {"tune": 0, "edge": 1, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
+               "final3": 8, "final4": 9}
+EDGE_SPLITS = ("edge",)
+"""Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
+EDGE_FRACTION = 0.12
 SWAPPABLE = ("labels", "silhouette")
 TISSUES = ("csf", "gm", "wm")
 T2_VALUES = (1.0, 0.45, 0.30)
@@ -447,8 +466,11 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
-    frames = ["as-is", "crop", "pad"] + (["tight"] if split in ("confirm", "holdout", "final", "final2", "final3") else [])
+    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "edge")
+    frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
+    if split in EDGE_SPLITS:  # [0, 1) onto the two ends: [0, 0.12) and (0.88, 1]
+        position = 2 * EDGE_FRACTION * position if position < 0.5 else 1 - 2 * EDGE_FRACTION * (1 - position)
     crop_fractions, crop_starts = rng.uniform(0.7, 0.9, size=2), rng.uniform(size=2)
     if frame == "tight":  # 45-60 % per axis: the brain fills most of the grid's border
         crop_fractions = 0.45 + 0.75 * (crop_fractions - 0.7)

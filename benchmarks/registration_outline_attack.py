@@ -12,7 +12,11 @@ uniform, 2 % noise, +-15 deg / +-15 mm). Moving kinds (each moved by a random ri
 - ``same``: the source itself (the control: a flag there is a false alarm);
 - ``labels``: the source quantised to its three Otsu classes (a label map with an inside);
 - ``silhouette0`` / ``silhouette1`` / ``silhouette2``: the source's filled Otsu foreground, dilated by 0, 1, 2
-  pixels, at one value (outline-only).
+  pixels, at one value (outline-only);
+- discrete kinds, made after the move and without noise (the images ``metric.discrete_levels`` is for; not in the
+  default run, ``--kinds threshold,posterized``): ``threshold``, the moved source above a percentile of its
+  content drawn in [20, 80] (binary, with structure inside); ``posterized``, the moved source quantised to 6
+  equal steps of its range (a kind the corpus never draws).
 
 Correct = mean TRE over the fixed content <= 1 pixel (2D) or 1 mm (3D), as in the corpus. Counts per kind:
 ok (correct, passed) / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
@@ -46,6 +50,8 @@ SOURCES_2D = ("BrainMidSagittalSlice.png", "FatMRISlice.png", "VisibleWomanHeadS
               "RatLungSlice1.mha")
 SOURCES_3D = ("KmeansTest_T1RawSkullStrip.nii.gz",)
 KINDS = ("same", "labels", "silhouette0", "silhouette1", "silhouette2")
+DISCRETE_KINDS = ("threshold", "posterized")
+ALL_KINDS = KINDS + DISCRETE_KINDS
 NOISE = 0.02
 
 
@@ -63,25 +69,38 @@ def moving_source(source: Image, kind: str) -> Image:
     return source.with_data(mask.astype(np.float64), name=f"{source.name}_{kind}")
 
 
+def discrete_after_move(moved_source: Image, kind: str, rng: np.random.Generator) -> Image:
+    """The moved source made discrete (module docstring): thresholded at a random percentile or posterized."""
+    data = moved_source.data
+    if kind == "threshold":
+        level = np.percentile(data[data > otsu_threshold(data)], rng.uniform(20, 80))
+        return moved_source.with_data((data > level).astype(np.float64))
+    steps = np.floor(6 * (data - data.min()) / max(float(np.ptp(data)), 1e-12))
+    return moved_source.with_data(np.minimum(steps, 5.0))
+
+
 def random_truth(rng: np.random.Generator, image: Image) -> RigidTransform:
     """Angles within +-15 deg about each axis, translations within +-15 units, about the image's centre."""
     angles = np.radians(rng.uniform(-15, 15, n_angles(image.dim)))
     return RigidTransform((*angles, *rng.uniform(-15, 15, image.dim)), tuple(image.center))
 
 
-def cases(seeds: int):
-    """(id, fixed, moving, truth) for every source, kind and seed."""
+def cases(seeds: int, kinds: tuple[str, ...] = KINDS):
+    """(id, fixed, moving, truth, kind) for every source, kind and seed."""
     folder = data_root() / "images" / "itk_examples_data" if data_root() else None
     if folder is None or not folder.is_dir():
         raise SystemExit("set TOPOMATCH_DATA_ROOT to the shared data (images/itk_examples_data)")
     for name in SOURCES_2D + SOURCES_3D:
         source = read_image(folder / name)
-        for kind in KINDS:
-            base = moving_source(source, kind)
+        for kind in kinds:
+            base = source if kind in DISCRETE_KINDS else moving_source(source, kind)
             for seed in range(seeds):
-                rng = np.random.default_rng([seed, KINDS.index(kind), len(name)])
+                rng = np.random.default_rng([seed, ALL_KINDS.index(kind), len(name)])
                 truth = random_truth(rng, source)
-                moving = moved(base, truth, order=1, noise=NOISE, rng=rng)
+                if kind in DISCRETE_KINDS:
+                    moving = discrete_after_move(moved(base, truth, order=1), kind, rng)
+                else:
+                    moving = moved(base, truth, order=1, noise=NOISE, rng=rng)
                 yield f"{Path(name).name.split('.')[0]}-{kind}-{seed}", source, moving, truth, kind
 
 
@@ -89,14 +108,20 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=4, help="random transforms per source and kind")
     ap.add_argument("--metrics", default="jt,mi")
+    ap.add_argument("--kinds", default=",".join(KINDS), help=f"any of {', '.join(ALL_KINDS)}")
+    ap.add_argument("--params", default="", help="JSON overrides of the register parameters (a counterfactual)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
+    kinds = tuple(k for k in args.kinds.split(",") if k)
+    if set(kinds) - set(ALL_KINDS):
+        ap.error(f"unknown kinds {sorted(set(kinds) - set(ALL_KINDS))}")
+    corpus.PARAMS.update(json.loads(args.params) if args.params else {})
     runners = {f"ours-{m}": (lambda m: lambda *a: corpus.run_ours(m, *a))(m) for m in args.metrics.split(",")}
     if corpus.elastix_available():
         runners["elastix"] = corpus.run_elastix
     rows, counts = [], collections.Counter()
     with tempfile.TemporaryDirectory() as tmp:
-        for cid, fixed, moving, truth, kind in cases(args.seeds):
+        for cid, fixed, moving, truth, kind in cases(args.seeds, kinds):
             fixed_path, moving_path = Path(tmp) / f"{cid}_fixed.nii.gz", Path(tmp) / f"{cid}_moving.nii.gz"
             corpus.write_image(fixed, fixed_path)
             corpus.write_image(moving, moving_path)
@@ -116,12 +141,13 @@ def main(argv: list[str] | None = None) -> None:
             print(" | ".join(line), flush=True)
     summary = {f"{dim}D {kind} {method}": "/".join(str(counts[(dim, kind, method, v)]) for v in ("ok", "FF", "fw",
                                                                                                   "silent"))
-               for dim in (2, 3) for kind in KINDS for method in runners}
+               for dim in (2, 3) for kind in kinds for method in runners}
     print("ok / FF / fw / silent")
     for key, value in summary.items():
         print(f"  {key:28s} {value}")
     if args.json:
-        args.json.write_text(json.dumps({"about": __doc__, "summary": summary, "rows": rows}, indent=1))
+        args.json.write_text(json.dumps({"about": __doc__, "kinds": kinds, "params": corpus.PARAMS, "summary": summary,
+                                         "rows": rows}, indent=1))
 
 
 if __name__ == "__main__":

@@ -44,6 +44,11 @@ class MetricSpec(_Named):
                                                     "silhouette, a mask): order 1, where all three are mutual "
                                                     "information, keeps the outline on the object's edge; order 2 "
                                                     "pulls it onto the largest bins' band (null: alpha)")
+    discrete_levels: int = Field(16, ge=0, le=1024,
+                                 description="a pair in which either image holds at most this many distinct "
+                                             "intensities (a label map, a thresholded mask) is measured as an "
+                                             "outline-only pair is, at outline_alpha with the finest level smoothed "
+                                             "by outline_smoothing, but not flagged as one (0: off)")
 
     def label(self) -> str:
         """``jt(alpha=2 histogram)``, ``tmi(alpha=2)``, ``mi``."""

@@ -26,7 +26,7 @@ from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from topomatch.stages.registration.structure import interior_spread, interior_structure, outline_gap
+from topomatch.stages.registration.structure import distinct_levels, interior_spread, interior_structure, outline_gap
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -189,7 +189,9 @@ class _Run:
         self.mask = mask
         self.structures = self._structures()
         self.outline_only = self._outline_only()
-        self.metric = params.metric.for_outline() if self.outline_only else params.metric
+        self.levels_count = self._levels_count()
+        self.outline_measure = self.outline_only or self.levels_count is not None
+        self.metric = params.metric.for_outline() if self.outline_measure else params.metric
         self.levels = self._pyramid()
         self.radius = rms_radius(fixed, mask)
         self.scales = np.r_[[1.0 / self.radius] * self.k, [1.0] * self.dim]
@@ -219,10 +221,17 @@ class _Run:
         """Either image has less structure than ``check.min_structure`` or less spread than ``check.min_spread``."""
         return bool(_below_outline_thresholds(self))
 
+    def _levels_count(self) -> int | None:
+        """The fewer distinct intensities of the two images when at most ``metric.discrete_levels`` (a label map, a
+        thresholded mask: measured as an outline-only pair is, not flagged as one), else None."""
+        limit = self.params.metric.discrete_levels
+        count = min(distinct_levels(image, limit) for image in (self.fixed, self.moving)) if limit > 0 else limit + 1
+        return count if count <= limit else None
+
     def _pyramid(self) -> list[_Level]:
         """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images
-        smoothed by its ``smoothing`` in its own pixels (the finest by ``outline_smoothing`` on an outline-only
-        pair)."""
+        smoothed by its ``smoothing`` in its own pixels (the finest by ``outline_smoothing`` on an outline-only or
+        discrete pair)."""
         p, m = self.params, self.metric
         mask_image = None if self.mask is None else self.fixed.with_data(self.mask.astype(np.float64))
         last = len(p.schedule) - 1
@@ -230,7 +239,7 @@ class _Run:
         def build(i: int, spec: LevelSpec, grid: LevelSpec, sigma: float) -> _Level:
             F, M = (self.fixed.smoothed(sigma), self.moving.smoothed(sigma)) if sigma > 0 else (self.fixed, self.moving)
             F, M = F.shrink_to(grid.spacing, MIN_LEVEL_VOXELS), M.shrink_to(grid.spacing, MIN_LEVEL_VOXELS)
-            blur = p.outline_smoothing if i == last and self.outline_only and p.outline_smoothing > 0 else spec.smoothing
+            blur = p.outline_smoothing if i == last and self.outline_measure and p.outline_smoothing > 0 else spec.smoothing
             if blur > 0:
                 F, M = (X.with_data(gaussian_blur(X.data, [blur] * X.dim)) for X in (F, M))
             mask = None if mask_image is None else mask_image.shrink_to(grid.spacing, MIN_LEVEL_VOXELS).data >= 0.5
@@ -487,7 +496,7 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     Jensen-Tsallis (alpha 2, histogram weights) on the same samples, and ends more than ``check.agreement`` away
     (a measure with a biased optimum: Tsallis MI on multimodal pairs). Nothing to compare for JT itself."""
     m, limit = run.params.metric, run.params.check.agreement
-    if limit <= 0 or (m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram") or run.outline_only:
+    if limit <= 0 or (m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram") or run.outline_measure:
         return []
     finest = run.levels[-1]
     jt = Objective(finest.objective.histogram, "jt", alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
@@ -670,8 +679,10 @@ def describe(t: RigidTransform) -> str:
 def self_check(run: _Run, theta: np.ndarray, value: float, stop: str) -> list[Flag]:
     """The flags of every test of :data:`CHECKS` at the result; ``run.better`` is the capture test's better end."""
     run.better, run.measures = None, dict(run.structures)
-    if run.outline_only and run.metric.alpha != run.params.metric.alpha:
+    if run.outline_measure and run.metric.alpha != run.params.metric.alpha:
         run.measures["outline_alpha"] = run.metric.alpha
+    if run.levels_count is not None:
+        run.measures["discrete_levels"] = run.levels_count
     flags: list[Flag] = []
     for check in CHECKS:
         flags += check(run, theta, value, stop)

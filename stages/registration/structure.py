@@ -75,6 +75,14 @@ def analysed_copy(image: Image) -> Image:
     return cached
 
 
+def distinct_levels(image: Image, limit: int, samples: int = 65536) -> int:
+    """How many distinct intensities ``image`` holds, counted up to ``limit + 1`` on an evenly strided subset of at
+    most ``samples`` voxels (an image with noise shows thousands there; a label map or thresholded mask its few)."""
+    flat = image.data.ravel()
+    values = np.unique(flat[::max(1, flat.size // samples)])
+    return int(min(values.size, limit + 1))
+
+
 def interior_structure(image: Image) -> float:
     """Mean gradient magnitude inside the object over its mean on the object's outline (unit-free, >= 0).
 

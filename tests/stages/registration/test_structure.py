@@ -181,3 +181,37 @@ def test_an_ordinary_pair_ignores_the_outline_settings_and_level_smoothing_blurs
                 np.testing.assert_allclose(got.data, gaussian_blur(small.data, [1.5, 1.5]), atol=1e-12)
                 compared += 1
     assert compared >= 4
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_distinct_levels_counts_a_label_map_and_stops_above_the_limit(d):
+    """A label map of 3 values over a strided subset holds 3; a noisy image counts as ``limit + 1``."""
+    from topomatch.stages.registration.structure import distinct_levels
+
+    shape = (64, 80) if d == 2 else (24, 30, 36)
+    labels = np.indices(shape).sum(axis=0) % 3
+    assert distinct_levels(Image(labels.astype(np.float64)), 16) == 3
+    assert distinct_levels(Image(labels.astype(np.float64)), 2) == 3  # counted up to limit + 1
+    noisy = labels + np.random.default_rng(0).normal(0, 0.01, shape)
+    assert distinct_levels(Image(noisy), 16) == 17
+
+
+def test_a_thresholded_image_with_structure_inside_is_measured_at_order_one_but_not_flagged_as_outline(pd_slice):
+    """PD slice against itself thresholded (binary, with structure inside: not outline-only) moved by a known T:
+    the pair is discrete (2 levels, recorded), measured at ``outline_alpha`` with the finest level smoothed, not
+    asked the outline test, T recovered to half a pixel; with ``discrete_levels`` 0 it is an ordinary pair."""
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform, target_registration_error
+
+    truth = RigidTransform.euler2d(7.0, -5.0, 4.0, pd_slice.center)
+    shifted = moved(pd_slice, truth)  # thresholded after the move, as a user's mask is: exactly two levels
+    inside = shifted.data[shifted.data > 0.2 * shifted.data.max()]
+    moving = shifted.with_data((shifted.data > np.percentile(inside, 50)).astype(np.float64))
+    reg = register(pd_slice, moving)
+    assert reg.measures["discrete_levels"] == 2 and reg.measures["outline_alpha"] == 1.0
+    assert reg.measures["structure_moving"] > RegisterParams().check.min_structure and "outline_gap" not in reg.measures
+    assert target_registration_error(reg.transform, truth, pd_slice.points()).mean() < 0.5
+    off = register(pd_slice, moving, RegisterParams.model_validate({"metric": {"discrete_levels": 0}}))
+    assert "discrete_levels" not in off.measures and "outline_alpha" not in off.measures
