@@ -182,7 +182,10 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final4": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final5": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+               2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
+    "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
@@ -195,7 +198,9 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final2": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final3": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final4": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
+         "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
@@ -224,10 +229,15 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final4", "mni", 3): 9103, ("final4", "mni15", 3): 9703, ("final4", "kmeans", 3): 9203,
          ("final4", "anatomical", 3): 9303, ("final4", "mni-axial", 2): 9102, ("final4", "mni-coronal", 2): 9402,
          ("final4", "mni-sagittal", 2): 9502, ("final4", "itk", 2): 9602,
-         ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722}
+         ("final5", "mni", 3): 10103, ("final5", "mni15", 3): 10703, ("final5", "kmeans", 3): 10203,
+         ("final5", "anatomical", 3): 10303, ("final5", "mni-axial", 2): 10102, ("final5", "mni-coronal", 2): 10402,
+         ("final5", "mni-sagittal", 2): 10502, ("final5", "itk", 2): 10602,
+         ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
+         ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822}
 
-SPLIT_ORDER = {"tune": 0, "edge": 1, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
-               "final3": 8, "final4": 9}
+SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
+               "final3": 8, "final4": 9,
+               "final5": 10}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -466,9 +476,11 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
-    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "edge")
+    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "edge", "tight")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
+    if split == "tight":  # every section tightly cropped (the same draws otherwise)
+        frame = "tight"
     if split in EDGE_SPLITS:  # [0, 1) onto the two ends: [0, 0.12) and (0.88, 1]
         position = 2 * EDGE_FRACTION * position if position < 0.5 else 1 - 2 * EDGE_FRACTION * (1 - position)
     crop_fractions, crop_starts = rng.uniform(0.7, 0.9, size=2), rng.uniform(size=2)

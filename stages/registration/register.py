@@ -26,7 +26,8 @@ from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from topomatch.stages.registration.structure import distinct_levels, interior_spread, interior_structure, outline_gap
+from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure, outline_gap,
+                                                     two_class_residual)
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -154,6 +155,8 @@ OUTLINE_TESTS = {
     "structure": (interior_structure, "has almost no structure inside its outline (interior gradient {:.3f} of the "
                                       "outline's"),
     "spread": (interior_spread, "is almost uniform inside its object (intensity spread {:.3f} of its contrast"),
+    "residual": (two_class_residual, "fills the grid with two intensity levels only (its two Otsu classes leave "
+                                     "{:.4f} of its variance"),
 }
 """The outline-only tests: name -> (measure of one image, how a flag words a low value: a format string); each
 is compared with ``check.min_<name>`` and is off at 0."""
@@ -218,7 +221,8 @@ class _Run:
         return {k: v for k, v in values.items() if math.isfinite(v)}
 
     def _outline_only(self) -> bool:
-        """Either image has less structure than ``check.min_structure`` or less spread than ``check.min_spread``."""
+        """Either image has less structure than ``check.min_structure``, less spread than ``check.min_spread`` or (its
+        object filling the grid) less residual than ``check.min_residual``."""
         return bool(_below_outline_thresholds(self))
 
     def _levels_count(self) -> int | None:
@@ -585,8 +589,8 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     if not why:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "
-                            f"or set check.min_structure 0 and check.min_spread 0 to register it as an ordinary "
-                            f"pair")]
+                            f"or set check.min_structure, check.min_spread and check.min_residual to 0 to "
+                            f"register it as an ordinary pair")]
 
 
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:

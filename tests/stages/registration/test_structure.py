@@ -215,3 +215,47 @@ def test_a_thresholded_image_with_structure_inside_is_measured_at_order_one_but_
     assert target_registration_error(reg.transform, truth, pd_slice.points()).mean() < 0.5
     off = register(pd_slice, moving, RegisterParams.model_validate({"metric": {"discrete_levels": 0}}))
     assert "discrete_levels" not in off.measures and "outline_alpha" not in off.measures
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_two_class_residual_of_a_grid_filling_two_level_image_is_its_noise(d):
+    """An object that fills the grid (bright over 80 % of it, the dark part a corner: no outline to judge, both other
+    measures NaN): at two levels 0 / 1 the residual is 0; with Gaussian noise of deviation s it is s^2 over the total
+    variance (p (1 - p) + s^2, p the dark fraction), to sampling error; a linear ramp added inside (an image with an
+    inside) raises it far above; an object inside a background is judged by the other two tests (NaN here)."""
+    from topomatch.stages.registration.structure import two_class_residual
+
+    shape = (60, 70) if d == 2 else (30, 34, 38)
+    grid = np.indices(shape)
+    dark = np.all(grid < (np.array(shape) * 0.45 ** (1 / d)).astype(int).reshape((d,) + (1,) * d), axis=0)
+    two = np.where(dark, 0.0, 1.0)
+    assert np.isnan(interior_structure(Image(two))) and np.isnan(interior_spread(Image(two)))
+    assert two_class_residual(Image(two)) == 0.0
+    s, p = 0.02, dark.mean()
+    noisy = two + np.random.default_rng(1).normal(0, s, shape)
+    assert two_class_residual(Image(noisy)) == pytest.approx(s ** 2 / (p * (1 - p) + s ** 2), rel=0.1)
+    ramp = two + np.where(dark, 0.0, 1.0 * grid[-1] / shape[-1])
+    assert two_class_residual(Image(ramp)) > 0.05
+    ball = (np.sqrt(((grid - np.array(shape).reshape((d,) + (1,) * d) / 2) ** 2).sum(axis=0)) < min(shape) / 3)
+    assert np.isnan(two_class_residual(Image(ball.astype(np.float64))))
+
+
+def test_a_tight_silhouette_is_outline_only_by_its_residual_and_the_test_can_be_turned_off(pd_slice):
+    """The PD slice cropped to its upper middle (the head fills the grid) against the silhouette of that crop, 2 %
+    noise: structure and spread cannot judge the silhouette (NaN), its two-class residual (~1e-3) makes the pair
+    outline-only; with ``min_residual`` 0 it is an ordinary pair."""
+    from topomatch.stages.registration.params import RegisterParams, for_dimension
+    from topomatch.stages.registration.register import _Run
+    from topomatch.stages.registration.structure import object_mask
+
+    rows, cols = pd_slice.data.shape
+    window = (slice(0, rows // 2), slice(cols // 4, 3 * cols // 4))  # the top of the head, 13 % of it outside
+    fixed = pd_slice.with_data(pd_slice.data[window].copy())
+    mask = object_mask(pd_slice)[window].astype(np.float64)
+    moving = fixed.with_data(mask + np.random.default_rng(0).normal(0, 0.02, mask.shape))
+    params = for_dimension(RegisterParams(), 2)
+    run = _Run(fixed, moving, params, None, None)
+    assert "structure_moving" not in run.structures and "spread_moving" not in run.structures
+    assert run.structures["residual_moving"] < 0.01 and run.outline_only
+    off = params.model_copy(update={"check": params.check.model_copy(update={"min_residual": 0.0})})
+    assert not _Run(fixed, moving, off, None, None).outline_only
