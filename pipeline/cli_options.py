@@ -7,7 +7,9 @@ from the field's description and default. Options left out on the command line a
 the parsed namespace (``argparse.SUPPRESS``), so the models' own defaults apply: every default is
 defined once, in the params. :func:`given_options` collects the given values as nested mappings
 and validates each with its field, naming the option in any error
-(``--unmatched-cost: Input should be greater than or equal to 0, got -1.0``).
+(``--unmatched-cost: Input should be greater than or equal to 0, got -1.0``). :func:`add_set_option` and
+:func:`set_options` give a command ``--set path=value`` for every other field of its models
+(``--set check.min_structure=0``), validated the same way.
 """
 
 from __future__ import annotations
@@ -125,4 +127,54 @@ def given_options(args: argparse.Namespace, models: Mapping[str, type[BaseModel]
             err = exc.errors()[0]
             raise ConfigError(f"{spec.name}: {err['msg'].removeprefix('Value error, ')}, got {value!r}") from None
         set_path(out, spec.path, value, spec.name)
+    return out
+
+
+def add_set_option(parser: argparse.ArgumentParser, models: Mapping[str, type[BaseModel]], default: str) -> None:
+    """``--set path=value`` (repeatable) for any field of ``models``; a path without a model's name is one of
+    ``default``'s (:func:`set_options`)."""
+    parser.add_argument("--set", dest="set_values", action="append", default=[], metavar="PARAM=VALUE",
+                        help=f"set any parameter: a {default} parameter by its dotted path (check.min_structure=0), or "
+                             f"{' / '.join(sorted(models))}.<path>; the value is read as YAML; repeatable "
+                             f"(`topomatch stages --json` lists every parameter)")
+
+
+def set_options(out: dict[str, dict[str, Any]], items: Sequence[str], models: Mapping[str, type[BaseModel]],
+                default: str) -> dict[str, dict[str, Any]]:
+    """``out`` (from :func:`given_options`) with each ``--set path=value`` of ``items`` validated by its field and
+    set (later items win).
+
+    Raises
+    ------
+    ConfigError
+        Not ``key=value``, no such field (named), or a value the field rejects.
+    """
+    from pydantic import TypeAdapter, ValidationError
+
+    from topomatch.pipeline.yaml_loading import load_yaml
+
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set {item!r}: expected param=value")
+        path = key.strip() if key.strip().split(".")[0] in models else f"{default}.{key.strip()}"
+        try:
+            info, _ = field_of(models, path)
+        except KeyError:
+            parent, _, _ = path.rpartition(".")
+            try:
+                known = _strip_optional(field_of(models, parent)[1]).model_fields if "." in parent else \
+                    models[parent].model_fields
+            except (KeyError, AttributeError):
+                known = models[default].model_fields
+                parent = default
+            raise ConfigError(f"--set {key.strip()}: no such parameter (those of {parent}: "
+                              f"{', '.join(known)})") from None
+        value = load_yaml(text)
+        try:
+            TypeAdapter(Annotated[info.annotation, info]).validate_json(json.dumps(value, allow_nan=True), strict=True)
+        except ValidationError as exc:
+            raise ConfigError(f"--set {key.strip()}: {exc.errors()[0]['msg'].removeprefix('Value error, ')}, "
+                              f"got {value!r}") from None
+        set_path(out, path, value, f"--set {key.strip()}")
     return out

@@ -590,7 +590,7 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "
                             f"or set check.min_structure, check.min_spread and check.min_residual to 0 to "
-                            f"register it as an ordinary pair")]
+                            f"register it as an ordinary pair (topomatch register --set check.min_structure=0 ...)")]
 
 
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:

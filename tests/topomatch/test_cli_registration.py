@@ -198,3 +198,21 @@ def test_cli_json_reports_the_order_used_on_an_outline_only_pair(capsys, pd_slic
     assert abs(data["angle"] + 4.0) < 0.3 and abs(data["tx"] - 8.0) < 0.5 and abs(data["ty"] - 5.0) < 0.5
     code, out, _ = register_cli(capsys, pd_slice.source, pd_slice.source, "--json")
     assert json.loads(out)["alpha"] == 2.0
+
+
+def test_cli_set_reaches_any_parameter_and_names_the_wrong_ones(capsys, itk_dir):
+    """``--set`` sets a nested register parameter (a flatness threshold no registration meets: flagged, exit 1;
+    the measure's order, by the stage's name: reported), a misspelt path lists the fields next to it, a rejected
+    value names the bound, a malformed item says what it expects: exit 2, nothing run."""
+    pd = itk_dir / "BrainProtonDensitySliceBorder20.png"
+    shifted = itk_dir / "BrainProtonDensitySliceShifted13x17y.png"
+    code, out, _ = register_cli(capsys, pd, shifted, "--json", "--set", "check.min_flatness=0.99")
+    assert code == 1 and "flatness" in json.loads(out)["flags"]
+    code, out, _ = register_cli(capsys, pd, shifted, "--json", "--set", "register.metric.alpha=1.5")
+    assert code == 0 and json.loads(out)["alpha"] == 1.5
+    for item, words in [("check.min_structur=0", "those of register.check: search"),
+                        ("check.min_residual=-1", "greater than or equal to 0"),
+                        ("load_pair.fixed_slice=x", "valid integer"),
+                        ("nothing", "expected param=value")]:
+        code, out, err = register_cli(capsys, pd, shifted, "--set", item)
+        assert code == 2 and words in err and out == ""

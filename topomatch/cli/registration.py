@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 
 from topomatch.cli.common import command, input_path, path_argument, print_result
-from topomatch.pipeline.cli_options import Option, add_options, given_options
+from topomatch.pipeline.cli_options import Option, add_options, add_set_option, given_options, set_options
 from topomatch.pipeline.errors import TopomatchError
 from topomatch.pipeline.files import check_writable_folder
 
@@ -55,6 +55,7 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                                                   "series folder), MetaImage, NRRD; bundled:NAME for a bundled one")
     p.add_argument("moving", type=input_path, help="moving (target) image or volume")
     add_options(p, _models(), _options())
+    add_set_option(p, _models(), "register")
     p.add_argument("--out", type=path_argument, metavar="DIR", help="write the moving image resampled on the fixed grid "
                    "(moving_resampled in the moving file's format; PNG also as a float32 .tif), transform.tfm, "
                    "overlay.png and registration.json")
@@ -67,7 +68,8 @@ def cmd_register(args: argparse.Namespace) -> int:
     if args.out:
         check_writable_folder(args.out)  # before the registration runs, not after
         check_outputs_spare_inputs(args.out, args.fixed, args.moving)
-    outcome = register_with(args.fixed, args.moving, given_options(args, _models(), _options()))
+    options = set_options(given_options(args, _models(), _options()), args.set_values, _models(), "register")
+    outcome = register_with(args.fixed, args.moving, options)
     summary = outcome.to_dict()
     if args.out:
         summary["files"] = write_registration_files(outcome, args.out)
