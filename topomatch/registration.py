@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -94,7 +95,8 @@ class RegistrationOutcome:
                "metric": self.metric, "alpha": reg.measures.get("outline_alpha", self.alpha), "method": reg.method, "objective": reg.value,
                "iterations": reg.iterations, "evaluations": reg.evaluations, "overlap": round(reg.overlap, 4),
                "seconds": round(reg.seconds, 4), "ok": reg.ok, "reason": reg.reason,
-               "flags": [f.check for f in reg.flags]}
+               "flags": [f.check for f in reg.flags],
+               "measures": {k: (round(float(v), 6) if math.isfinite(float(v)) else None) for k, v in reg.measures.items()}}
         if t.dim == 2:
             out.update({"tx": round(t.tx, 6), "ty": round(t.ty, 6), "angle": round(t.angle, 6)})
         return out

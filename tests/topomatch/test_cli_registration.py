@@ -207,7 +207,8 @@ def test_cli_set_reaches_any_parameter_and_names_the_wrong_ones(capsys, itk_dir)
     pd = itk_dir / "BrainProtonDensitySliceBorder20.png"
     shifted = itk_dir / "BrainProtonDensitySliceShifted13x17y.png"
     code, out, _ = register_cli(capsys, pd, shifted, "--json", "--set", "check.min_flatness=0.99")
-    assert code == 1 and "flatness" in json.loads(out)["flags"]
+    res = json.loads(out)  # the flag and the measure it compared, in the JSON
+    assert code == 1 and "flatness" in res["flags"] and 0 < res["measures"]["flatness"] < 0.99
     code, out, _ = register_cli(capsys, pd, shifted, "--json", "--set", "register.metric.alpha=1.5")
     assert code == 0 and json.loads(out)["alpha"] == 1.5
     for item, words in [("check.min_structur=0", "those of register.check: search"),
