@@ -104,6 +104,17 @@ def add_options(parser: argparse.ArgumentParser, models: Mapping[str, type[BaseM
         parser.add_argument(spec.name, **kwargs)
 
 
+def _validated(info: FieldInfo, value: Any, name: str) -> Any:
+    """``value`` if ``info``'s field accepts it (strict, as from JSON); else a ConfigError naming ``name``."""
+    from pydantic import TypeAdapter, ValidationError
+
+    try:
+        TypeAdapter(Annotated[info.annotation, info]).validate_json(json.dumps(value, allow_nan=True), strict=True)
+    except ValidationError as exc:
+        raise ConfigError(f"{name}: {exc.errors()[0]['msg'].removeprefix('Value error, ')}, got {value!r}") from None
+    return value
+
+
 def given_options(args: argparse.Namespace, models: Mapping[str, type[BaseModel]],
                   specs: Sequence[str | Option]) -> dict[str, dict[str, Any]]:
     """The values given on the command line as ``{head: nested mapping}``, each validated by its field.
@@ -113,20 +124,11 @@ def given_options(args: argparse.Namespace, models: Mapping[str, type[BaseModel]
     ConfigError
         A value the field rejects; the message names the option.
     """
-    from pydantic import TypeAdapter, ValidationError
-
     out: dict[str, dict[str, Any]] = {}
     for spec in map(_option, specs):
-        if not hasattr(args, spec.dest):
-            continue
-        value = getattr(args, spec.dest)
-        info, _ = field_of(models, spec.path)
-        try:
-            TypeAdapter(Annotated[info.annotation, info]).validate_json(json.dumps(value, allow_nan=True), strict=True)
-        except ValidationError as exc:
-            err = exc.errors()[0]
-            raise ConfigError(f"{spec.name}: {err['msg'].removeprefix('Value error, ')}, got {value!r}") from None
-        set_path(out, spec.path, value, spec.name)
+        if hasattr(args, spec.dest):
+            value = _validated(field_of(models, spec.path)[0], getattr(args, spec.dest), spec.name)
+            set_path(out, spec.path, value, spec.name)
     return out
 
 
@@ -149,8 +151,6 @@ def set_options(out: dict[str, dict[str, Any]], items: Sequence[str], models: Ma
     ConfigError
         Not ``key=value``, no such field (named), or a value the field rejects.
     """
-    from pydantic import TypeAdapter, ValidationError
-
     from topomatch.pipeline.yaml_loading import load_yaml
 
     for item in items:
@@ -170,11 +170,6 @@ def set_options(out: dict[str, dict[str, Any]], items: Sequence[str], models: Ma
                 parent = default
             raise ConfigError(f"--set {key.strip()}: no such parameter (those of {parent}: "
                               f"{', '.join(known)})") from None
-        value = load_yaml(text)
-        try:
-            TypeAdapter(Annotated[info.annotation, info]).validate_json(json.dumps(value, allow_nan=True), strict=True)
-        except ValidationError as exc:
-            raise ConfigError(f"--set {key.strip()}: {exc.errors()[0]['msg'].removeprefix('Value error, ')}, "
-                              f"got {value!r}") from None
+        value = _validated(info, load_yaml(text), f"--set {key.strip()}")
         set_path(out, path, value, f"--set {key.strip()}")
     return out

@@ -229,7 +229,9 @@ class _Run:
         """The fewer distinct intensities of the two images when at most ``metric.discrete_levels`` (a label map, a
         thresholded mask: measured as an outline-only pair is, not flagged as one), else None."""
         limit = self.params.metric.discrete_levels
-        count = min(distinct_levels(image, limit) for image in (self.fixed, self.moving)) if limit > 0 else limit + 1
+        if limit <= 0:
+            return None
+        count = min(distinct_levels(image, limit) for image in (self.fixed, self.moving))
         return count if count <= limit else None
 
     def _pyramid(self) -> list[_Level]:

@@ -54,25 +54,33 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
         outside = grown
 
 
+def once_per_image(compute):
+    """``compute(image)`` computed once per :class:`Image` object and kept on it (an Image is frozen: its data do
+    not change), so that the outline-only tests, which share their pieces, pay for each piece once."""
+    key = f"_{compute.__name__}"
+
+    def cached(image: Image):
+        if key not in image.__dict__:
+            object.__setattr__(image, key, compute(image))
+        return image.__dict__[key]
+
+    cached.__name__, cached.__doc__ = compute.__name__, compute.__doc__
+    return cached
+
+
+@once_per_image
 def object_mask(image: Image) -> np.ndarray:
     """The object of ``image`` (bool, its shape): the content (:func:`~.image.foreground_mask`) closed by
     :data:`CLOSING` pixels with its holes filled. Computed once per image."""
-    cached = image.__dict__.get("_object_mask")
-    if cached is None:
-        unit = (1.0,) * image.dim
-        cached = fill_holes(~grow(~grow(foreground_mask(image), CLOSING, unit), CLOSING, unit))
-        object.__setattr__(image, "_object_mask", cached)
-    return cached
+    unit = (1.0,) * image.dim
+    return fill_holes(~grow(~grow(foreground_mask(image), CLOSING, unit), CLOSING, unit))
 
 
+@once_per_image
 def analysed_copy(image: Image) -> Image:
     """``image`` block-averaged by 2 along axes of at least 48 pixels: the copy :func:`interior_structure` and
     :func:`interior_spread` analyse (made once per image, so that its :func:`object_mask` is computed once too)."""
-    cached = image.__dict__.get("_analysed_copy")
-    if cached is None:
-        cached = image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
-        object.__setattr__(image, "_analysed_copy", cached)
-    return cached
+    return image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
 
 
 def distinct_levels(image: Image, limit: int, samples: int = 65536) -> int:
@@ -83,6 +91,7 @@ def distinct_levels(image: Image, limit: int, samples: int = 65536) -> int:
     return int(min(values.size, limit + 1))
 
 
+@once_per_image
 def interior_structure(image: Image) -> float:
     """Mean gradient magnitude inside the object over its mean on the object's outline (unit-free, >= 0).
 
@@ -103,6 +112,7 @@ def interior_structure(image: Image) -> float:
     return float(np.mean(magnitude[inside]) / edge) if edge > 0 else float("nan")
 
 
+@once_per_image
 def interior_spread(image: Image) -> float:
     """Spread of the intensities inside the object over the object's contrast with its background (unit-free,
     >= 0): ``(q90 - q10) / |median(core) - median(background core)|`` on the image block-averaged by 2 (axes of
@@ -131,7 +141,8 @@ def two_class_residual(image: Image) -> float:
     """Fraction of ``image``'s variance left within its two Otsu classes (1 - Otsu's effectiveness, unit-free in
     [0, 1]): a mask or silhouette with noise leaves its noise (~1e-3), an image with an inside far more (brain
     sections 0.015-0.5 on the corpus). Judged only where :func:`interior_structure` and :func:`interior_spread`
-    cannot (both NaN: an object that fills the grid, a tight field of view); NaN elsewhere."""
+    cannot (both NaN: an object that fills the grid, a tight field of view; both are kept on the image, so asking
+    them again costs nothing); NaN elsewhere."""
     if not (np.isnan(interior_structure(image)) and np.isnan(interior_spread(image))):
         return float("nan")
     data = image.data.ravel()
