@@ -36,6 +36,11 @@ NN / mAP on every report collection are printed (markdown) and written as JSON.
 consensus, iterative) x screens, the other settings at the default's; ``--guard G`` admits only settings that lose at
 most G mAP against the default of the time on every undegraded choice-side collection (added after the rules grid's
 tune-side numbers were read, before any report number); ``--choose-only`` stops after the choice.
+
+``--grid parts`` (issue 29, 2026-12-05) evaluates the part sets of :data:`PART_SETS` (the new parts ``gps`` and ``lfd``
+added or swapped in) x :data:`PART_SCREENS`, the other settings at the default's; every index must also hold the
+``gps`` and ``lfd`` rows (``topomatch index ... --method gps``, ``--method lfd``), and "its best part" is the best of
+all seven.
 """
 
 from __future__ import annotations
@@ -72,19 +77,41 @@ MARGIN_TIE = 0.005
 #: ``--grid rules`` (issue 29, 2026-12-03): what a part's agreement is measured against (Fusion.agreement_rule) and
 #: the screen, every other setting at the current default's; fixed before any number of it was read.
 RULE_SCREENS = {"none": None, "0.5": 0.5, "0.6": 0.6, "0.65": 0.65, "0.7": 0.7, "0.8": 0.8, "0.9": 0.9}
-#: Degraded copies: part -> fraction of the shapes permuted.
-DEGRADED = {"D2, SH scrambled": {"d2": 1.0, "sh": 1.0}, "hidden-like": {"d2": 0.5, "sh": 0.5, "agd": 0.25}}
+#: Degraded copies: part -> fraction of the shapes permuted. The light field (``lfd``, extrinsic, ~0.27 mAP on real
+#: poses) is degraded as D2 and SH are; the GPS distributions (``gps``, intrinsic) as HKS and ShapeDNA, not at all
+#: (issue 29, 2026-12-05, written before the parts grid was run). A part absent from a run is skipped.
+DEGRADED = {"D2, SH scrambled": {"d2": 1.0, "sh": 1.0, "lfd": 1.0},
+            "hidden-like": {"d2": 0.5, "sh": 0.5, "lfd": 0.5, "agd": 0.25}}
+#: ``--grid parts`` (issue 29, 2026-12-05, fixed before any fused number of it was read): the default's parts with
+#: the new ones added or swapped in, each with the screens below, every other setting at the default's.
+PART_SETS = {"default parts": ("agd", "hks", "shapedna", "d2", "sh"),
+             "+gps": ("agd", "hks", "shapedna", "d2", "sh", "gps"),
+             "+gps -agd": ("hks", "shapedna", "d2", "sh", "gps"),
+             "+lfd": ("agd", "hks", "shapedna", "d2", "sh", "lfd"),
+             "+gps +lfd": ("agd", "hks", "shapedna", "d2", "sh", "gps", "lfd")}
+PART_SCREENS = {"none": None, "0.5": 0.5, "0.6": 0.6, "0.7": 0.7}
 
 
-def load(db: str) -> tuple[dict[str, np.ndarray], np.ndarray]:
-    """{part: (n, n) matrix} and (n,) class labels of the labelled shapes of an index."""
+def load(db: str, extra: tuple[str, ...] = ()) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """{part: (n, n) matrix} and (n,) class labels of the labelled shapes of an index: the default fusion's parts
+    and the vector methods ``extra`` (``--grid parts``; every labelled shape must have a row of each)."""
     method = get_method(DEFAULT_METHOD)
     index = open_index(db)
     rows, descriptors = index.parts(DEFAULT_METHOD)
     keep = [i for i, r in enumerate(rows) if r.label]
-    mats = index.part_matrices(DEFAULT_METHOD, {p: [ds[i] for i in keep] for p, ds in descriptors.items()},
-                               slot="labelled")
-    return dict(zip(method.parts, mats)), np.array([rows[i].label for i in keep])
+    mats = dict(zip(method.parts, index.part_matrices(DEFAULT_METHOD, {p: [ds[i] for i in keep]
+                                                                         for p, ds in descriptors.items()},
+                                                      slot="labelled")))
+    for part in extra:
+        part_rows, part_descriptors = index.parts(part)
+        where = {r.path: i for i, r in enumerate(part_rows)}
+        missing = [rows[i].path for i in keep if rows[i].path not in where]
+        if missing:
+            raise SystemExit(f"{db}: {len(missing)} labelled shapes have no {part} row (e.g. {missing[0]}): "
+                             f"topomatch index ... --method {part}")
+        (mats[part],) = index.part_matrices(part, {part: [part_descriptors[part][where[rows[i].path]] for i in keep]},
+                                            slot="labelled")
+    return mats, np.array([rows[i].label for i in keep])
 
 
 def restrict(coll, keep):
@@ -98,6 +125,8 @@ def degraded(coll, fractions: dict[str, float], seed: int = 0):
     rng = np.random.default_rng(seed)
     out = dict(mats)
     for p, fraction in fractions.items():
+        if p not in mats:
+            continue
         moved = rng.choice(len(labels), int(round(fraction * len(labels))), replace=False)
         perm = np.arange(len(labels))
         perm[moved] = rng.permutation(moved)
@@ -124,6 +153,12 @@ def rule_settings(base):
             yield f"agreement rule {rule}; screen {s}", replace(base, agreement_rule=rule, screen=screen)
 
 
+def part_settings(base):
+    """(name, Fusion) for ``--grid parts``: each part set of :data:`PART_SETS` with each screen."""
+    for (name, parts), (s, screen) in itertools.product(PART_SETS.items(), PART_SCREENS.items()):
+        yield f"{name}; screen {s}", replace(base, parts=parts, screen=screen)
+
+
 def nn_map(D, labels) -> tuple[float, float]:
     m = retrieval_metrics(D, labels).micro
     return float(m["nn"]), float(m["map"])
@@ -135,9 +170,10 @@ def main() -> None:
     ap.add_argument("--tune", nargs="*", default=[], help="indexes where settings may be chosen")
     ap.add_argument("--report", nargs="*", default=[], help="indexes only reported")
     ap.add_argument("--json", help="write the results here")
-    ap.add_argument("--grid", choices=["full", "rules"], default="full",
+    ap.add_argument("--grid", choices=["full", "rules", "parts"], default="full",
                     help="full: the grid of the protocol (3,360 settings); rules: the agreement rules x screens, the "
-                         "other settings at the default's (issue 29)")
+                         "other settings at the default's (issue 29); parts: the part sets of PART_SETS x screens "
+                         "(issue 29, 2026-12-05; every index must also hold gps and lfd)")
     ap.add_argument("--guard", type=float,
                     help="admit only settings that lose at most this much mAP against the current default on every "
                          "undegraded collection of the choice side (issue 29, 2026-12-03: the worst-margin criterion "
@@ -147,7 +183,10 @@ def main() -> None:
     args = ap.parse_args()
 
     base = get_method(DEFAULT_METHOD).fusion
-    wt = load(args.watertight)
+    extra = tuple(sorted({p for parts in PART_SETS.values() for p in parts} - set(base.parts))) \
+        if args.grid == "parts" else ()
+    all_parts = base.parts + extra
+    wt = load(args.watertight, extra)
     classes = sorted(set(wt[1]))
     half_a = np.isin(wt[1], classes[0::2])
     colls = {"Watertight half A": restrict(wt, half_a), "Watertight half B": restrict(wt, ~half_a), "Watertight": wt}
@@ -155,34 +194,39 @@ def main() -> None:
     for group, dbs in (("tune", args.tune), ("report", args.report)):
         for db in dbs:
             name = Path(db).stem
-            colls[name] = load(db)
+            colls[name] = load(db, extra)
             (tune if group == "tune" else report).append(name)
             for what, fractions in DEGRADED.items():
                 colls[f"{name} ({what})"] = degraded(colls[name], fractions)
                 (tune if group == "tune" else report).append(f"{name} ({what})")
     for half in ("Watertight half A", "Watertight half B"):
         colls[f"{half} (hidden-like)"] = degraded(colls[half], DEGRADED["hidden-like"])
-    part_scores = {n: [nn_map(c[0][p], c[1]) for p in base.parts] for n, c in colls.items()}
+    part_scores = {n: [nn_map(c[0][p], c[1]) for p in all_parts] for n, c in colls.items()}
     best_nn = {n: max(nn for nn, _ in scores) for n, scores in part_scores.items()}
     best_part = {n: max(ap for _, ap in scores) for n, scores in part_scores.items()}
-    part_lists = {n: [c[0][p] for p in base.parts] for n, c in colls.items()}
-    # each rule's first agreement is the same for every setting (consensus and iterative start from the same one)
-    agreements = {n: {"mean": agreement(mats)} for n, mats in part_lists.items()}
+    # each rule's first agreement is the same for every setting of one part set (consensus and iterative start from
+    # the same one)
+    agreements: dict = {}
 
-    def first_agreement(n, rule):
-        key = "mean" if rule == "mean" else "consensus"
-        if key not in agreements[n]:
-            agreements[n][key] = consensus_agreement(part_lists[n])
+    def first_agreement(n, fusion):
+        key = ("mean" if fusion.agreement_rule == "mean" else "consensus", fusion.parts)
+        if key not in agreements.setdefault(n, {}):
+            mats = [colls[n][0][p] for p in fusion.parts]
+            agreements[n][key] = agreement(mats) if key[0] == "mean" else consensus_agreement(mats)
         return agreements[n][key]
 
     def evaluate(fusion, names):
-        return {n: nn_map(fused_matrix(part_lists[n], fusion, decide(
-            part_lists[n], fusion, agreements=first_agreement(n, fusion.agreement_rule))), colls[n][1]) for n in names}
+        out = {}
+        for n in names:
+            mats = [colls[n][0][p] for p in fusion.parts]
+            out[n] = nn_map(fused_matrix(mats, fusion, decide(mats, fusion, agreements=first_agreement(n, fusion))),
+                            colls[n][1])
+        return out
 
     # every setting on the collections where a choice may be made (both Watertight halves, their
     # hidden-like copies and the tune collections); the report collections only for the settings chosen
     choice_side = [n for n in colls if n.startswith("Watertight half")] + tune
-    settings = grid_settings(base) if args.grid == "full" else rule_settings(base)
+    settings = {"full": grid_settings, "rules": rule_settings, "parts": part_settings}[args.grid](base)
     grid = {name: (fusion, evaluate(fusion, choice_side)) for name, fusion in settings}
 
     def margin(results, names):
@@ -209,7 +253,7 @@ def main() -> None:
         return margin(results, names), float(np.mean([results[n][1] for n in names]))
 
     out = {"selections": {}, "collections": {n: len(c[1]) for n, c in colls.items()}}
-    if args.grid == "rules":  # small: every setting's results on the choice side, for the docs
+    if args.grid in ("rules", "parts"):  # small: every setting's results on the choice side, for the docs
         out["grid"] = {g: {n: [round(x, 4) for x in r] for n, r in res.items()} for g, (_, res) in grid.items()}
     for side, chosen_on, reported_on in (("A", "Watertight half A", "Watertight half B"),
                                          ("B", "Watertight half B", "Watertight half A")):
@@ -235,10 +279,13 @@ def main() -> None:
         return
     shown = ["Watertight half A", "Watertight half B", "Watertight half A (hidden-like)",
              "Watertight half B (hidden-like)"] + report
-    methods = {p: {n: nn_map(colls[n][0][p], colls[n][1]) for n in shown} for p in base.parts}
+    methods = {p: {n: nn_map(colls[n][0][p], colls[n][1]) for n in shown} for p in all_parts}
     equal = get_method("topomatch-equal").fusion
     methods["topomatch-equal"] = {n: nn_map(fused_matrix([colls[n][0][p] for p in equal.parts], equal), colls[n][1])
                                   for n in shown}
+    for side in "AB":  # the chosen settings themselves on every shown collection
+        name = out["selections"][side]["setting"]
+        methods.setdefault(f"selection {side}: {name}", evaluate(grid[name][0], shown))
     methods[f"{DEFAULT_METHOD} (default)"] = {n: nn_map(fused_matrix([colls[n][0][p] for p in base.parts], base),
                                                         colls[n][1]) for n in shown}
     out["methods"] = methods

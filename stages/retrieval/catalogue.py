@@ -12,11 +12,13 @@ Methods (SHREC'07 Watertight numbers in docs/retrieval.md):
 - ``rgpd``, ``srg``: the thesis's skeletons (ch. 3: mixture distance; ch. 4: Fiedler vector),
   endpoint features (a, dv, dc) matched by the greedy correspondence;
 - ``agd``: intrinsic skeleton (average geodesic distance) with heat-kernel endpoint signatures;
-- ``hks``: heat-kernel-signature histograms; ``shapedna``: normalised Laplace-Beltrami spectrum (read from
+- ``hks``: heat-kernel-signature histograms; ``gps``: distributions of distances in the global point signature
+  embedding (Rustamov 2007; not a part of the default fusion); ``shapedna``: normalised Laplace-Beltrami spectrum (read from
   the shared spectrum; ``shapedna-full``: its own eigen-solve on the full mesh, kept for comparison);
 - ``sdgdm``: the spectrum of the geodesic distance matrix (Smeets et al. 2012), on the cleaned, capped full mesh
   (not a fusion part);
-- ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics);
+- ``d2``, ``sh``: extrinsic baselines (shape distribution, spherical harmonics); ``lfd``: the light field
+  descriptor (Chen et al. 2003), a view-based extrinsic part (not a part of the default fusion);
 - ``topomatch``: the adaptive fusion of agd, hks, shapedna, d2 and sh (a part dropped when its agreement
   with the others is below 0.5 of the best part's, each kept part scaled by its median, a pair's two
   smallest scaled dissimilarities averaged, re-ranked by manifold ranking, k from the collection's size, alpha = 0.95,
@@ -37,8 +39,8 @@ import numpy as np
 
 from topomatch.pipeline.contract import ConfigError
 from topomatch.stages.reeb.recipe import skeleton_chain
-from topomatch.stages.retrieval import hks
-from topomatch.stages.retrieval.baselines import d2, sdgdm, shapedna, spherical_harmonics
+from topomatch.stages.retrieval import gps, hks
+from topomatch.stages.retrieval.baselines import d2, light_field, sdgdm, shapedna, spherical_harmonics
 from topomatch.stages.retrieval.descriptor import MatchOptions
 from topomatch.stages.retrieval.fusion import Fusion
 
@@ -125,6 +127,8 @@ METHODS: dict[str, Method] = {m.name: m for m in (
                                           "endpoint_hks_descriptor"), unmatched_cost=0.5),
     Method("hks", "heat-kernel-signature histograms", "vector", SPECTRAL_CHAIN + ("hks",),
            distance=hks.distance_matrix),
+    Method("gps", "distributions of global point signature distances (Rustamov 2007) over the shared spectrum's 20 "
+           "leading eigenpairs", "vector", SPECTRAL_CHAIN + ("gps",), distance=gps.distance_matrix),
     Method("shapedna", "ShapeDNA, the normalised Laplace-Beltrami spectrum (Reuter 2006), read from the shared "
            "spectrum of the 6,000-face copy", "vector", SPECTRAL_CHAIN + ("shapedna_of_spectrum",),
            distance=shapedna.distance_matrix),
@@ -138,6 +142,9 @@ METHODS: dict[str, Method] = {m.name: m for m in (
     Method("sdgdm", "SD-GDM, the logarithms of the 40 leading singular values of the geodesic distance matrix of 64 "
            "farthest-point samples over the largest (Smeets 2012), on the cleaned, capped full mesh", "vector",
            SDGDM_MESH_CHAIN + ("sdgdm",), distance=sdgdm.distance_matrix),
+    Method("lfd", "light field descriptor (Chen 2003): Zernike and Fourier features of the silhouettes seen from 5 "
+           "dodecahedra's vertices, compared under the dodecahedron's 60 rotations", "vector",
+           CLEAN_CHAIN + ("light_field",), distance=light_field.distance_matrix),
     Method("topomatch", "adaptive fusion of agd, hks, shapedna, d2 and sh: a part whose nearest neighbours agree "
            "with the others' less than 0.5 of the best part's is dropped, each kept part scaled by its median, a "
            "pair's two smallest scaled dissimilarities averaged, re-ranked by manifold ranking (k from the collection's size, "

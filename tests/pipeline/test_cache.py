@@ -64,10 +64,10 @@ MESH_CHAIN = [
     {"transform": {"axis": [1.0, 0.0, 0.0], "angle_deg": 30.0, "scale": 2.0}},
     {"decimate": {"ratio": 0.5}}, {"decimate_crosscheck": {"ratio": 0.5}}, {"clean": {"components": "largest"}},
     "laplacian", "fiedler", {"morse": {"function": "mixture"}}, "level_sets", "reeb_graph", "prune",
-    "endpoint_descriptor", "libigl_reference", "fill_holes", {"spectrum": {"k": 20}}, "hks",
+    "endpoint_descriptor", "libigl_reference", "fill_holes", {"spectrum": {"k": 20}}, "hks", "gps",
     {"shapedna_of_spectrum": {"k": 10}},
     "endpoint_hks_descriptor",
-    "d2", "spherical_harmonics", {"shapedna": {"k": 10}}, "sdgdm",
+    "d2", "spherical_harmonics", {"shapedna": {"k": 10}}, "sdgdm", {"light_field": {"light_fields": 2}},
 ]
 IMAGE_CHAIN = [
     "load_pair", {"misalign_pair": {"theta": [4.0, 3.0, -2.0]}},

@@ -14,10 +14,13 @@ module                        descriptor                               shape    
 :mod:`.sdgdm`                 SD-GDM (Smeets 2012), log of the         (k - 1,) = (39,)    L2
                               geodesic distance matrix's singular
                               values over the largest
+:mod:`.light_field`           light field (Chen 2003): Zernike and     (L * 10 * 46,)      min over
+                              Fourier features of dodecahedron         = (2300,)           rotations
+                              silhouettes                                                  of L1
 ============================  =======================================  ==================  ========
 
 :mod:`.sampling` holds the shared surface sampler. Each module also defines its pipeline stage
-(``d2``, ``spherical_harmonics``, ``shapedna``, ``sdgdm``); the retrieval methods that use them are records of
+(``d2``, ``spherical_harmonics``, ``shapedna``, ``sdgdm``, ``light_field``); the retrieval methods that use them are records of
 :mod:`topomatch.stages.retrieval.catalogue`.
 """
 
