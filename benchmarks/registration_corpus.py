@@ -109,7 +109,14 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``edge`` (tune side, 2D): sections from the outer 12 % of the brain's extent at either end (the small, low and
   lateral sections where ``final3``'s silent errors lay), every kind and frame; for choosing, never reported.
 - ``final4``: drawn after the fifth round was chosen on ``edge``, the same design as ``final3``, fresh seeds, run once:
-  the numbers this project reports now.
+  the numbers this project reported until the sixth round: seen.
+- ``tight`` (tune side, 2D): MNI sections, every one tightly cropped (45-60 % per axis); the sixth round (the
+  residual test) was chosen on it; never reported.
+- ``final5``: drawn after the sixth round, the same design as ``final4``, fresh seeds, run once: the numbers this
+  project reported until the seventh round (``check.min_outline_view``, its threshold read on ``tune``, ``edge`` and
+  ``tight``): seen.
+- ``final6``: drawn after the seventh round, the same design as ``final5``, fresh seeds 11xxx, run once: the numbers
+  this project reports now.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -184,6 +191,8 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final5": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+               2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
 }
@@ -199,6 +208,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final3": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final4": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
 
@@ -232,12 +242,15 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final5", "mni", 3): 10103, ("final5", "mni15", 3): 10703, ("final5", "kmeans", 3): 10203,
          ("final5", "anatomical", 3): 10303, ("final5", "mni-axial", 2): 10102, ("final5", "mni-coronal", 2): 10402,
          ("final5", "mni-sagittal", 2): 10502, ("final5", "itk", 2): 10602,
+         ("final6", "mni", 3): 11103, ("final6", "mni15", 3): 11703, ("final6", "kmeans", 3): 11203,
+         ("final6", "anatomical", 3): 11303, ("final6", "mni-axial", 2): 11102, ("final6", "mni-coronal", 2): 11402,
+         ("final6", "mni-sagittal", 2): 11502, ("final6", "itk", 2): 11602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822}
 
 SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
-               "final5": 10}
+               "final5": 10, "final6": 11}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -476,7 +489,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
-    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "edge", "tight")
+    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "edge", "tight")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     if split == "tight":  # every section tightly cropped (the same draws otherwise)

@@ -186,6 +186,11 @@ class CheckSpec(Params):
                                            "outline) at the result: outlines that do not correspond at all "
                                            "(the validation corpus's correct outline-only results: at most 5.8); "
                                            "0 flags every such pair")
+    min_outline_view: float = Field(0.45, ge=0, le=1, allow_inf_nan=False,
+                                    description="such a pair is flagged when less than this fraction of the "
+                                                "outline-only image's object boundary is outline inside the grid "
+                                                "(the rest is the grid's border cutting the object: a tight field "
+                                                "of view; structure.outline_in_view; 0: this test is off)")
     outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
                                 description="such a pair is flagged when a coarser level's measure is lower at the "
                                             "result than at its own end by more than this fraction (the "

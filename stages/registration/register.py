@@ -27,6 +27,7 @@ from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
 from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure, outline_gap,
+                                                     outline_in_view,
                                                      two_class_residual)
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
@@ -573,13 +574,20 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
 def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     """The pair is outline-only (``run.outline_only``: a mask, a silhouette) and its outline does not pin the result
     down: the two outlines lie more than ``check.outline_gap`` apart at the result (they do not correspond there),
-    or the finer levels left the optimum a coarser level found (the consistency measure above
-    ``check.outline_drop``). Such a pair passing both is accepted."""
+    the finer levels left the optimum a coarser level found (the consistency measure above ``check.outline_drop``),
+    or the grid's border cuts away more of the outline-only image's object than ``check.min_outline_view`` leaves
+    (:func:`~.structure.outline_in_view`). Such a pair passing all three is accepted."""
     c = run.params.check
     if not run.outline_only:
         return []
+    below = _below_outline_thresholds(run)
     flat = [f"the {key.partition('_')[2]} image {OUTLINE_TESTS[test][1].format(value)}; min_{test} {limit:g})"
-            for key, value, test, limit in _below_outline_thresholds(run)]
+            for key, value, test, limit in below]
+    roles = sorted({key.partition("_")[2] for key, *_ in below})  # the outline-only image(s): fixed, moving
+    views = [(outline_in_view(getattr(run, r)), r) for r in roles]
+    view, role = min(((v, r) for v, r in views if math.isfinite(v)), default=(1.0, None))
+    if role is not None:
+        run.measures["outline_view"] = view
     gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, RigidTransform(tuple(theta),
                                                                                           tuple(run.center)))
     drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
@@ -587,7 +595,9 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
             f"correspond there" if math.isfinite(gap) else "the outlines cannot be compared at the result"]
            if not gap <= c.outline_gap else []) + \
           ([f"the finest level left the optimum a coarser level found (its measure {drop:.1%} lower there; "
-            f"outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else [])
+            f"outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else []) + \
+          ([f"only {view:.0%} of the {role} image's object boundary is outline inside the grid, the rest is cut by "
+            f"the grid's border (min_outline_view {c.min_outline_view:.0%})"] if view < c.min_outline_view else [])
     if not why:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "

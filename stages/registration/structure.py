@@ -83,6 +83,20 @@ def analysed_copy(image: Image) -> Image:
     return image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
 
 
+@once_per_image
+def outline_in_view(image: Image) -> float:
+    """Fraction of the boundary of the object (:func:`object_mask`) that is its outline inside the grid rather
+    than the grid's border cutting it (unit-free in [0, 1]): the physical area (length in 2D) of the pixel faces
+    between object and background over that plus the object's pixel faces on the grid's border. 1 for an object
+    clear of the border, near 0 for one that fills the grid; NaN for an empty object."""
+    obj = object_mask(image)
+    spacing = np.asarray(image.spacing, dtype=np.float64)[::-1]  # array axis order
+    face = np.prod(spacing) / spacing  # area of a pixel face normal to each array axis
+    inside = sum(face[a] * np.count_nonzero(np.diff(obj, axis=a)) for a in range(obj.ndim))
+    cut = sum(face[a] * np.count_nonzero(np.take(obj, end, axis=a)) for a in range(obj.ndim) for end in (0, -1))
+    return float(inside / (inside + cut)) if inside + cut > 0 else float("nan")
+
+
 def distinct_levels(image: Image, limit: int, samples: int = 65536) -> int:
     """How many distinct intensities ``image`` holds, counted up to ``limit + 1`` on an evenly strided subset of at
     most ``samples`` voxels (an image with noise shows thousands there; a label map or thresholded mask its few)."""

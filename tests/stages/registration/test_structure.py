@@ -8,7 +8,8 @@ from scipy import ndimage
 
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.image import gaussian_blur
-from topomatch.stages.registration.structure import fill_holes, interior_spread, interior_structure, outline_gap
+from topomatch.stages.registration.structure import (fill_holes, interior_spread, interior_structure, outline_gap,
+                                                     outline_in_view)
 
 
 @pytest.mark.parametrize("shape", [(40, 50), (20, 25, 30)])
@@ -88,6 +89,31 @@ def test_interior_spread_of_two_level_and_one_level_objects(d):
     assert np.isnan(interior_spread(Image(np.ones(shape))))
 
 
+@pytest.mark.parametrize("spacing", [(1.0, 1.0), (1.0, 1.0, 1.0), (0.5, 2.0, 3.0)])
+def test_outline_in_view_of_a_box_clear_of_or_cut_by_the_border(spacing):
+    """A box of a x b (x c) pixels: its whole boundary is outline while it is clear of the border; slid against
+    one face of the grid, that face's area is cut, not outline; across the grid, both. Face areas
+    in physical units (a face normal to an axis has the product of the other two spacings)."""
+    dim = len(spacing)
+    shape = (30, 40, 50)[:dim]
+    sides = (10, 16, 22)[:dim]
+    sp = np.asarray(spacing)[::-1]  # array axis order
+    face = np.prod(sp) / sp
+    boundary = [2 * face[a] * np.prod(sides) / sides[a] for a in range(dim)]  # both faces normal to axis a
+    clear = np.zeros(shape)
+    clear[tuple(slice(5, 5 + s) for s in sides)] = 100.0
+    assert outline_in_view(Image(clear, spacing=spacing)) == pytest.approx(1.0)
+    touching = np.zeros(shape)
+    touching[tuple(slice(0, s) if a == 0 else slice(5, 5 + s) for a, s in enumerate(sides))] = 100.0
+    assert outline_in_view(Image(touching, spacing=spacing)) == pytest.approx(1 - boundary[0] / 2 / sum(boundary))
+    across = np.zeros(shape)  # the full extent of the first array axis: both of its faces cut
+    across[tuple(slice(0, shape[0]) if a == 0 else slice(5, 5 + s) for a, s in enumerate(sides))] = 100.0
+    walls = 2 * face[0] * np.prod(sides[1:])
+    sides_across = [shape[0], *sides[1:]]
+    total = sum(2 * face[a] * np.prod(sides_across) / sides_across[a] for a in range(dim))
+    assert outline_in_view(Image(across, spacing=spacing)) == pytest.approx(1 - walls / total)
+
+
 def test_a_silhouette_pair_is_flagged_when_its_levels_disagree_and_the_check_can_be_turned_off(pd_slice):
     """``outline_gap 0`` flags every silhouette pair; by default the flag follows the recorded measures (the
     outlines' gap at the result above ``outline_gap``, or the finest level left a coarser level's optimum by
@@ -104,7 +130,10 @@ def test_a_silhouette_pair_is_flagged_when_its_levels_disagree_and_the_check_can
     assert every.measures["structure_moving"] < 0.04 < every.measures["structure_fixed"]
     default = register(pd_slice, moving)
     drop, gap, c = default.measures.get("consistency", 0.0), default.measures["outline_gap"], RegisterParams().check
-    assert ("outline" in {f.check for f in default.flags}) == (drop > c.outline_drop or gap > c.outline_gap)
+    view = default.measures["outline_view"]
+    assert c.min_outline_view < view < 1  # the head touches the grid's border a little
+    assert ("outline" in {f.check for f in default.flags}) == (drop > c.outline_drop or gap > c.outline_gap
+                                                               or view < c.min_outline_view)
     off = register(pd_slice, moving, RegisterParams.model_validate({"check": {"min_structure": 0}}))
     assert "outline" not in {f.check for f in off.flags}
 
