@@ -115,6 +115,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final5``: drawn after the sixth round, the same design as ``final4``, fresh seeds, run once: the numbers this
   project reported until the seventh round (``check.min_outline_view``, its threshold read on ``tune``, ``edge`` and
   ``tight``): seen.
+- ``capture`` (tune side, declared after ``final6``): ITK slices (2D) and nibabel's ``anatomical.nii`` (3D) as label
+  maps, silhouettes, thresholded and saturated images, swapped, cropped, thick (seeds 19xx): the sources and kinds of
+  ``final6``'s gross wrong basins, to look for that class where choosing is allowed; never reported.
 - ``final6``: drawn after the seventh round, the same design as ``final5``, fresh seeds 11xxx, run once: the numbers
   this project reports now.
 
@@ -195,6 +198,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
+    "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
@@ -210,7 +214,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma")}
+         "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "capture": ("labels", "silhouette", "threshold", "saturated")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
@@ -246,9 +251,10 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final6", "anatomical", 3): 11303, ("final6", "mni-axial", 2): 11102, ("final6", "mni-coronal", 2): 11402,
          ("final6", "mni-sagittal", 2): 11502, ("final6", "itk", 2): 11602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
-         ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822}
+         ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
+         ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902}
 
-SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
+SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
                "final5": 10, "final6": 11}
 EDGE_SPLITS = ("edge",)
