@@ -81,7 +81,9 @@ RULE_SCREENS = {"none": None, "0.5": 0.5, "0.6": 0.6, "0.65": 0.65, "0.7": 0.7, 
 #: poses) is degraded as D2 and SH are; the GPS distributions (``gps``, intrinsic) as HKS and ShapeDNA, not at all
 #: (issue 29, 2026-12-05, written before the parts grid was run). A part absent from a run is skipped.
 DEGRADED = {"D2, SH scrambled": {"d2": 1.0, "sh": 1.0, "lfd": 1.0},
-            "hidden-like": {"d2": 0.5, "sh": 0.5, "lfd": 0.5, "agd": 0.25}}
+            "hidden-like": {"d2": 0.5, "sh": 0.5, "agd": 0.25, "lfd": 0.5}}
+"""(``lfd`` last: the permutations are drawn from one stream in this order, so the other parts' copies are those of
+the runs before it.)"""
 #: ``--grid parts`` (issue 29, 2026-12-05, fixed before any fused number of it was read): the default's parts with
 #: the new ones added or swapped in, each with the screens below, every other setting at the default's.
 PART_SETS = {"default parts": ("agd", "hks", "shapedna", "d2", "sh"),
@@ -283,9 +285,10 @@ def main() -> None:
     equal = get_method("topomatch-equal").fusion
     methods["topomatch-equal"] = {n: nn_map(fused_matrix([colls[n][0][p] for p in equal.parts], equal), colls[n][1])
                                   for n in shown}
-    for side in "AB":  # the chosen settings themselves on every shown collection
-        name = out["selections"][side]["setting"]
-        methods.setdefault(f"selection {side}: {name}", evaluate(grid[name][0], shown))
+    if args.grid == "parts":  # the chosen settings themselves on every shown collection
+        for side in "AB":
+            name = out["selections"][side]["setting"]
+            methods.setdefault(f"selection {side}: {name}", evaluate(grid[name][0], shown))
     methods[f"{DEFAULT_METHOD} (default)"] = {n: nn_map(fused_matrix([colls[n][0][p] for p in base.parts], base),
                                                         colls[n][1]) for n in shown}
     out["methods"] = methods

@@ -52,7 +52,8 @@ ZERNIKE_INDICES = tuple((n, m) for n in range(ZERNIKE_ORDER + 1) for m in range(
 FEATURES = len(ZERNIKE_INDICES) + FOURIER_COEFFICIENTS
 """Features of one silhouette: 36 Zernike magnitudes and 10 Fourier magnitudes."""
 BLOCK = 64
-"""Shapes compared at once by :func:`distance_matrix` (bounds its memory: L^2 x 100 x 46 floats a shape)."""
+"""Shapes compared at once by :func:`distance_matrix` at 5 light fields (fewer at more: a block holds L^2 x 100 x 46
+floats a shape, ~56 MB at 5)."""
 
 
 class LightFieldParams(Params):
@@ -181,12 +182,12 @@ def zernike_basis(resolution: int) -> np.ndarray:
 
 def contour_fourier(images: np.ndarray) -> np.ndarray:
     """Magnitudes of the Fourier coefficients 1..10 of each silhouette's centroid distance over coefficient 0,
-    (d, 10); the centroid distance in each of 64 directions is that of the farthest pixel centre (0 for an
-    empty image)."""
+    (d, 10); the centroid distance in each of 64 directions is that of the farthest pixel centre (all 0 for a
+    silhouette of fewer than 3 pixels)."""
     out = np.zeros((images.shape[0], FOURIER_COEFFICIENTS))
     for k in range(images.shape[0]):
         ys, xs = np.nonzero(images[k])
-        if xs.size == 0:
+        if xs.size < 3:  # no outline to speak of: a dot's centroid distance is no shape
             continue
         x, y = xs - xs.mean(), ys - ys.mean()
         bins = ((np.arctan2(y, x) + math.pi) / (2 * math.pi) * CONTOUR_DIRECTIONS).astype(np.int64) % CONTOUR_DIRECTIONS
@@ -240,13 +241,14 @@ def distance_matrix(X, Y=None) -> np.ndarray:
     axis = np.broadcast_to(np.arange(AXES), perm.shape)  # (60, 10)
     symmetric = Y is None
     out = np.empty((A.shape[0], B.shape[0]))
+    size = max(1, BLOCK * 25 // A.shape[1] ** 2)  # the memory of a block grows with the light fields squared
     for q in range(A.shape[0]):
-        for start in range(q if symmetric else 0, B.shape[0], BLOCK):  # a symmetric matrix: its upper triangle
-            block = B[start:start + BLOCK]
+        for start in range(q if symmetric else 0, B.shape[0], size):  # a symmetric matrix: its upper triangle
+            block = B[start:start + size]
             # L1 of every view of q against every view of the block's shapes: (L, 10, b, L, 10)
             cost = np.abs(A[q][:, :, None, None, None, :] - block[None, None]).sum(axis=-1)
             # rotation r pairs q's axis i with the other's axis perm[r, i]: (60, 10, L, b, L), summed over i
-            out[q, start:start + BLOCK] = cost[:, axis, :, :, perm].sum(axis=1).min(axis=(0, 1, 3))
+            out[q, start:start + size] = cost[:, axis, :, :, perm].sum(axis=1).min(axis=(0, 1, 3))
     if symmetric:
         upper = np.triu(out)
         out = upper + np.triu(upper, 1).T
@@ -258,7 +260,7 @@ def distance(a, b) -> float:
     return float(distance_matrix(a, b)[0, 0])
 
 
-@stage("light_field", params=LightFieldParams, version=1, consumes=("mesh",), produces=("descriptor",))
+@stage("light_field", params=LightFieldParams, version=2, consumes=("mesh",), produces=("descriptor",))
 def light_field_stage(mesh: Mesh, *, params: LightFieldParams) -> DescriptorResult:
     """The light field descriptor (Chen et al. 2003): Zernike and Fourier features of dodecahedron silhouettes."""
     return DescriptorResult(Descriptor("vector", descriptor(mesh, params)))
