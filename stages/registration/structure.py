@@ -93,7 +93,7 @@ def outline_in_view(image: Image) -> float:
     spacing = np.asarray(image.spacing, dtype=np.float64)[::-1]  # array axis order
     face = np.prod(spacing) / spacing  # area of a pixel face normal to each array axis
     inside = sum(face[a] * np.count_nonzero(np.diff(obj, axis=a)) for a in range(obj.ndim))
-    cut = sum(face[a] * np.count_nonzero(np.take(obj, end, axis=a)) for a in range(obj.ndim) for end in (0, -1))
+    cut = sum(face[a] * np.count_nonzero(np.take(obj, [0, -1], axis=a)) for a in range(obj.ndim))
     return float(inside / (inside + cut)) if inside + cut > 0 else float("nan")
 
 

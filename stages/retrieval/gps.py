@@ -25,6 +25,7 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import Params, StageError, stage
+from topomatch.stages.retrieval.baselines.d2 import histogram
 from topomatch.stages.retrieval.baselines.vectors import pairwise
 from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
 from topomatch.stages.spectral.spectrum import Spectrum
@@ -50,13 +51,6 @@ def embedding(spectrum: Spectrum, k: int) -> np.ndarray:
     return spectrum.vectors[:, 1:k + 1] / np.sqrt(values)
 
 
-def _histogram(x: np.ndarray, bins: int) -> np.ndarray:
-    if x.size == 0:
-        return np.zeros(bins)
-    k = np.minimum((x * (bins / 3.0)).astype(np.int64), bins - 1)
-    return np.bincount(k, minlength=bins) / float(x.size)
-
-
 def gps_histograms(spectrum: Spectrum, params: GPSParams) -> np.ndarray:
     """(3 bins,) histograms of the GPS distances over their mean: all pairs, inner pairs, outer pairs."""
     G = embedding(spectrum, params.k)
@@ -70,8 +64,7 @@ def gps_histograms(spectrum: Spectrum, params: GPSParams) -> np.ndarray:
     median = norm[order[np.searchsorted(np.cumsum(p[order]), 0.5)]]
     inner = norm <= median
     both_inner, both_outer = inner[a] & inner[b], ~inner[a] & ~inner[b]
-    return np.concatenate([_histogram(x, params.bins), _histogram(x[both_inner], params.bins),
-                           _histogram(x[both_outer], params.bins)])
+    return np.concatenate([histogram(part, params.bins, 3.0) for part in (x, x[both_inner], x[both_outer])])
 
 
 def distance_matrix(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:

@@ -91,9 +91,16 @@ def descriptor(mesh: Mesh, params: D2Params | None = None) -> np.ndarray:
         holds the pairs beyond ``max_distance``).
     """
     params = D2Params() if params is None else params
-    x = distances(mesh, params)
-    k = np.minimum((x * (params.bins / params.max_distance)).astype(np.int64), params.bins - 1)
-    return np.bincount(k, minlength=params.bins) / float(x.shape[0])
+    return histogram(distances(mesh, params), params.bins, params.max_distance)
+
+
+def histogram(x: np.ndarray, bins: int, max_distance: float) -> np.ndarray:
+    """Fractions of ``x`` (normalised distances, >= 0) in ``bins`` equal bins on ``[0, max_distance)``, the larger
+    ones in the last: (bins,) summing to 1 (zeros for an empty ``x``)."""
+    if x.size == 0:
+        return np.zeros(bins)
+    k = np.minimum((x * (bins / max_distance)).astype(np.int64), bins - 1)
+    return np.bincount(k, minlength=bins) / float(x.size)
 
 
 def density(x: np.ndarray, params: D2Params | None = None) -> np.ndarray:

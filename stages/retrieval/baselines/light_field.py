@@ -41,7 +41,7 @@ from pydantic import Field
 
 from topomatch.pipeline.contract import Params, stage
 from topomatch.stages.mesh.mesh import Mesh
-from topomatch.stages.retrieval.baselines.sampling import checked_areas
+from topomatch.stages.retrieval.baselines.sampling import area_centroid_and_rms_radius, checked_areas
 from topomatch.stages.retrieval.descriptor import Descriptor, DescriptorResult
 
 ZERNIKE_ORDER = 10
@@ -128,9 +128,8 @@ def light_field_rotations(count: int, seed: int) -> np.ndarray:
 
 def normalised_vertices(mesh: Mesh) -> np.ndarray:
     """Vertices with the area-weighted centroid at the origin and the farthest vertex at radius 1, (n, 3)."""
-    areas = checked_areas(mesh)
-    centroids = mesh.V[mesh.F].mean(axis=1)
-    V = mesh.V - (areas @ centroids) / areas.sum()
+    centroid, _ = area_centroid_and_rms_radius(mesh.V, mesh.F, checked_areas(mesh))
+    V = mesh.V - centroid
     radius = np.linalg.norm(V, axis=1).max()
     return V / radius
 
