@@ -175,11 +175,12 @@ class CheckSpec(Params):
                                           "object-background median difference, structure.py) is outline-only too: "
                                           "a mask or silhouette whose outline is too intricate for min_structure "
                                           "(0: this test is off)")
-    min_residual: float = Field(0.01, ge=0, le=1, allow_inf_nan=False,
+    min_residual: float = Field(0.002, ge=0, le=1, allow_inf_nan=False,
                                 description="where neither test above can judge an image (its object fills the grid: "
-                                            "a tight field of view), a pair in which it leaves less than this "
-                                            "fraction of its variance within its two Otsu classes is outline-only too: "
-                                            "a mask or silhouette with noise (structure.py; 0: this test is off)")
+                                            "a tight field of view), a pair in which the larger variance of its two "
+                                            "Otsu classes is less than this fraction of their contrast squared is "
+                                            "outline-only too: a mask or silhouette with noise (structure.py; 0: this "
+                                            "test is off)")
     outline_gap: float = Field(6.0, ge=0, allow_inf_nan=False,
                                description="such a pair is flagged when the two outlines lie farther apart than this "
                                            "(physical units, mean, compared within 4 fixed pixels of the fixed "
