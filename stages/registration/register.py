@@ -26,9 +26,8 @@ from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure, outline_gap,
-                                                     outline_in_view,
-                                                     two_class_residual)
+from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure,
+                                                     once_per_image, outline_gap, outline_in_view, two_class_residual)
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -53,34 +52,15 @@ class Flag:
 class Registration:
     """The outcome of one registration (any method, either dimension).
 
-    Attributes
-    ----------
-    transform : RigidTransform
-        T with ``fixed(p) ~ moving(T(p))``, about the fixed grid's centre.
-    value : float
-        The measure at ``transform`` (finest level; NaN for methods without one).
-    flags : tuple of Flag
-        What the self-check found (empty: ``ok``).
-    method : str
-        E.g. ``spsa/jt(alpha=2 histogram)`` or ``simpleitk/mattes(line_search)``.
-    seconds : float
-        Wall time of the registration (images already in memory).
-    iterations, evaluations : int
-        Optimiser iterations and objective evaluations over all levels.
-    stop_reason : str
-        The finest level's stop reason.
-    history : dict of ndarray
-        Per iteration over all levels: ``level`` (k,), ``theta`` (k, p), ``value``, ``step``, ``blocked``.
-    initial : RigidTransform or None
-        Where the schedule started.
-    overlap : float
-        Fraction of the finest level's fixed samples inside the moving image at the result.
-    restarts : int
-        Runs of the schedule adopted after the first (a capture-check retry).
-    measures : dict of float
-        What each self-check test measured at the result, flagged or not (``chance``: the measure over its chance
-        level; ``consistency``: the largest relative drop of a coarser level's measure; ``agreement``: the
-        distance to JT's optimum; ``content``, ``prominence``, ``flatness``): the numbers its thresholds compare.
+    ``transform``: T with ``fixed(p) ~ moving(T(p))``, about the fixed grid's centre; ``value``: the measure there
+    (finest level; NaN for methods without one); ``method``: e.g. ``spsa/jt(alpha=2 histogram)``; ``seconds``: wall
+    time (images already in memory); ``iterations``, ``evaluations``: over all levels; ``stop_reason``: the finest
+    level's; ``history``: per iteration over all levels, ``level`` (k,), ``theta`` (k, p), ``value``, ``step``,
+    ``blocked``; ``initial``: where the schedule started; ``overlap``: fraction of the finest level's fixed samples
+    inside the moving image at the result; ``restarts``: runs of the schedule adopted after the first (a capture
+    retry); ``measures``: what each self-check test measured, flagged or not (``chance``: the measure over its
+    chance level; ``consistency``: the largest relative drop of a coarser level's measure; ``agreement``: the
+    distance to JT's optimum; ``content``, ``prominence``, ``flatness``): the numbers its thresholds compare.
     """
 
     transform: RigidTransform
@@ -106,9 +86,7 @@ class Registration:
         return "; ".join(f.message for f in self.flags)
 
     def summary(self) -> dict:
-        t = self.transform
-        values = dict(zip(t.names, (*t.angles_deg, *map(float, t.translation))))
-        return {**values, "objective": self.value, "ok": self.ok, "reason": self.reason,
+        return {**self.transform.degrees(), "objective": self.value, "ok": self.ok, "reason": self.reason,
                 "flags": ",".join(f.check for f in self.flags), "method": self.method, "iterations": self.iterations,
                 "evaluations": self.evaluations, "restarts": self.restarts, "overlap": self.overlap,
                 "stop": self.stop_reason, "seconds": self.seconds}
@@ -135,13 +113,10 @@ def initial_translation(fixed: Image, moving: Image, mode: str, angles=None) -> 
     return pm - c - euler_matrix(angles) @ (pf - c)
 
 
+@once_per_image
 def _centroid(image: Image) -> np.ndarray:
-    """The image's intensity centroid, computed once per image object (the start search asks for it often)."""
-    cached = image.__dict__.get("_centroid")
-    if cached is None:
-        cached = image.centroid()
-        object.__setattr__(image, "_centroid", cached)
-    return cached
+    """The image's intensity centroid, computed once per image (the start search asks for it often)."""
+    return image.centroid()
 
 
 def sample_mask(fixed: Image, params: RegisterParams) -> np.ndarray | None:
@@ -192,7 +167,7 @@ class _Run:
         self.center = fixed.center
         self.mask = mask
         self.structures = self._structures()
-        self.outline_only = self._outline_only()
+        self.outline_only = bool(_below_outline_thresholds(self))
         self.levels_count = self._levels_count()
         self.outline_measure = self.outline_only or self.levels_count is not None
         self.metric = params.metric.for_outline() if self.outline_measure else params.metric
@@ -214,17 +189,16 @@ class _Run:
     def _structures(self) -> dict[str, float]:
         """``<test>_fixed`` / ``<test>_moving`` for each outline-only test whose threshold ``check.min_<test>`` is
         above 0 (:data:`OUTLINE_TESTS`), left out when NaN (nothing to judge). Either image below a threshold makes
-        the pair outline-only (:meth:`_outline_only`): a mask or silhouette, whose outline is all the measure can
-        align (``metric.outline_alpha``, ``outline_smoothing``, :func:`check_outline`)."""
+        the pair outline-only (``outline_only``): a mask or silhouette, whose outline is all the measure can align
+        (``metric.outline_alpha``, ``outline_smoothing``, :func:`check_outline`)."""
         c = self.params.check
         values = {f"{test}_{role}": measure(image) for test, (measure, _) in OUTLINE_TESTS.items()
                   if getattr(c, f"min_{test}") > 0 for role, image in (("fixed", self.fixed), ("moving", self.moving))}
         return {k: v for k, v in values.items() if math.isfinite(v)}
 
-    def _outline_only(self) -> bool:
-        """Either image has less structure than ``check.min_structure``, less spread than ``check.min_spread`` or (its
-        object filling the grid) less residual than ``check.min_residual``."""
-        return bool(_below_outline_thresholds(self))
+    def at(self, theta) -> RigidTransform:
+        """The transform of parameters ``theta`` about the fixed grid's centre."""
+        return RigidTransform(tuple(theta), tuple(self.center))
 
     def _levels_count(self) -> int | None:
         """The fewer distinct intensities of the two images when at most ``metric.discrete_levels`` (a label map, a
@@ -447,7 +421,7 @@ def check_bounds(run: _Run, theta, value, stop) -> list[Flag]:
     at = (theta <= run.lower + tol) | (theta >= run.upper - tol)
     if not at.any():
         return []
-    names = [n for n, b in zip(RigidTransform(tuple(theta), tuple(run.center)).names, at) if b]
+    names = [n for n, b in zip(run.at(theta).names, at) if b]
     return [Flag("bounds", f"the estimate is on the search bound of {', '.join(names)} (bounds.max_translation / "
                            f"max_angle): the misalignment is probably outside the capture range")]
 
@@ -553,9 +527,8 @@ def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
         if overlap < m and math.isfinite(here) and there > here + run.params.check.margin * abs(here) \
                 and run.distance(end, theta) >= 2.0 * run.levels[0].spacing:
             return [Flag("overlap_bound", f"the measure keeps rising where the images overlap less than min_overlap "
-                                          f"({m:.0%}): it climbs to {describe(RigidTransform(tuple(end), tuple(run.center)))}"
-                                          f", {overlap:.1%} overlap; the true alignment probably lies outside the "
-                                          f"accepted overlap")]
+                                          f"({m:.0%}): it climbs to {describe(run.at(end))}, {overlap:.1%} "
+                                          f"overlap; the true alignment probably lies outside the accepted overlap")]
     return []
 
 
@@ -588,8 +561,7 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     view, role = min(((v, r) for v, r in views if math.isfinite(v)), default=(1.0, None))
     if role is not None:
         run.measures["outline_view"] = view
-    gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, RigidTransform(tuple(theta),
-                                                                                          tuple(run.center)))
+    gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, run.at(theta))
     drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
     why = ([f"the outlines lie {gap:.2f} units apart at the result (outline_gap {c.outline_gap:g}): they do not "
             f"correspond there" if math.isfinite(gap) else "the outlines cannot be compared at the result"]
@@ -667,14 +639,13 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
         better_ends, run.ends = run.ends, saved
         confirmed = fine(end) > value and run.distance(end, theta) >= 2.0 * levels[0].spacing
         run.better = (end, end_stop, better_ends) if confirmed else None
-        where = f"and ends at {describe(RigidTransform(tuple(end), tuple(run.center)))}, higher at full resolution"
+        where = f"and ends at {describe(run.at(end))}, higher at full resolution"
     else:
         confirmed = fine(best) > value
         where = "outside the search bounds (max_translation / max_angle)"
     if not confirmed:
         return []
-    start = RigidTransform(tuple(best), tuple(run.center))
-    return [Flag("capture", f"a start at {describe(start)} reaches a higher value than the result ({best_value:.4g} > "
+    return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result ({best_value:.4g} > "
                             f"{here:.4g} at the {levels[0].spacing:g}-unit level) {where}: the registration stopped in "
                             f"a local optimum; the misalignment is probably outside the capture range")]
 
@@ -710,29 +681,13 @@ def self_check(run: _Run, theta: np.ndarray, value: float, stop: str) -> list[Fl
 def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParams(), *,
              fixed_mask: np.ndarray | None = None,
              callback: Callable[[int, int, np.ndarray, float], bool | None] | None = None) -> Registration:
-    """Register ``moving`` to ``fixed`` (rigid, 2D or 3D): T with ``moving(T(p)) ~ fixed(p)``.
+    """Register ``moving`` to ``fixed`` (both 2D or both 3D; any sizes, spacings and orientations): T with
+    ``moving(T(p)) ~ fixed(p)``, flagged with a ``reason`` when the self-check fails (``check.on_failure='flag'``).
 
-    Parameters
-    ----------
-    fixed, moving : Image
-        Both 2D or both 3D (any sizes, spacings and orientations).
-    params : RegisterParams
-        Fields not set take the dimension's defaults (:func:`~topomatch.stages.registration.params.for_dimension`).
-    fixed_mask : ndarray of bool, shape of ``fixed.data``, optional
-        Fixed pixels to sample (instead of ``params.sampling``).
-    callback : callable, optional
-        ``callback(level, k, theta, value)`` after every optimiser iteration; True stops the level.
-
-    Returns
-    -------
-    Registration
-        With flags and a ``reason`` when the self-check fails (``check.on_failure='flag'``).
-
-    Raises
-    ------
-    StageError
-        Images of different dimensionality, a mask that selects nothing or has another shape, or a failed
-        self-check with ``check.on_failure='error'``.
+    ``params`` fields not set take the dimension's defaults (:func:`~.params.for_dimension`); ``fixed_mask`` (bool,
+    shape of ``fixed.data``): the fixed pixels to sample instead of ``params.sampling``; ``callback(level, k, theta,
+    value)`` after every optimiser iteration, True stopping the level. StageError: images of different
+    dimensionality, a mask that selects nothing or has another shape, a failed self-check with ``on_failure='error'``.
     """
     t0 = time.perf_counter()
     if fixed.dim != moving.dim:
@@ -756,14 +711,12 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         flags = self_check(run, theta, value, stop)
     keys = ("level", "theta", "value", "step", "blocked")
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
-    transform = RigidTransform(tuple(theta), tuple(run.center))
-    reg = Registration(transform, float(value), tuple(flags), params.method(), time.perf_counter() - t0,
-                       int(len(history["level"])), sum({id(lv.objective): lv.objective.n_evals
-                                                         for lv in run.levels}.values()), stop, history,
-                       RigidTransform(tuple(run.start), tuple(run.center)), fine.overlap(theta), restarts,
-                       dict(run.measures))
+    evaluations = sum({id(lv.objective): lv.objective.n_evals for lv in run.levels}.values())
+    reg = Registration(run.at(theta), float(value), tuple(flags), params.method(), time.perf_counter() - t0,
+                       int(len(history["level"])), evaluations, stop, history, run.at(run.start), fine.overlap(theta),
+                       restarts, dict(run.measures))
     if flags and params.check.on_failure == "error":
-        raise StageError(f"registration failed: {reg.reason} (estimate {describe(transform)})")
+        raise StageError(f"registration failed: {reg.reason} (estimate {describe(reg.transform)})")
     return reg
 
 
