@@ -42,29 +42,21 @@ def batch_jensen_tsallis2(h: np.ndarray) -> np.ndarray:
         return first - np.einsum("bj,bj->b", cols, cols) / (N * N)
 
 
-def search_spacing(images: list[Image], extent: float | None = None, side: int = SEARCH_SIDE) -> float:
-    """The physical spacing that brings the smaller physical extent of the images (or ``extent``) to about
-    ``side`` pixels."""
-    if extent is None:
-        extent = min(float(min(np.asarray(im.size) * np.asarray(im.spacing))) for im in images)
-    return extent / side
+def search_spacing(images: list[Image]) -> float:
+    """The physical spacing that brings the smaller physical extent of the images to about ``SEARCH_SIDE`` pixels."""
+    return min(float(min(np.asarray(im.size) * np.asarray(im.spacing))) for im in images) / SEARCH_SIDE
+
+
+def _accepted(raw: np.ndarray, overlaps: np.ndarray, min_overlap: float) -> np.ndarray:
+    """The scores ``raw``, ``-inf`` where fewer than ``min_overlap`` of the samples (or none) are inside."""
+    return np.where((overlaps >= min_overlap) & (overlaps > 0) & np.isfinite(raw), raw, -np.inf)
 
 
 class SearchImages:
-    """Fixed and moving image at the search resolution, ready to score many transforms at once.
-
-    Parameters
-    ----------
-    fixed, moving : Image
-        Full-resolution images; transforms are in physical units about ``center``.
-    center : sequence of d floats
-        The rotation centre (the fixed grid's).
-    min_overlap : float
-        Transforms with fewer fixed samples inside the moving image score ``-inf``.
-    spacing : float, optional
-        Physical spacing of the search copy (default :func:`search_spacing` of both images): each image is
-        block-averaged by the integer factor per axis that comes closest below it.
-    """
+    """Fixed and moving image at the search resolution, ready to score many transforms at once: transforms in
+    physical units about ``center`` (d,), ``-inf`` with fewer than ``min_overlap`` of the fixed samples inside the
+    moving image; each image block-averaged by the integer factor per axis that comes closest below ``spacing``
+    (physical; default :func:`search_spacing` of both images)."""
 
     def __init__(self, fixed: Image, moving: Image, *, center, min_overlap: float, spacing: float | None = None):
         spacing = search_spacing([fixed, moving]) if spacing is None else spacing
@@ -115,13 +107,6 @@ class SearchImages:
         base = ((U + self._pad) * self._strides[:, None]).sum(axis=0)
         return base[None, :] + (steps @ self._strides)[:, None]
 
-    def score_steps(self, theta: np.ndarray, steps: np.ndarray, *, min_overlap: float | None = None) -> np.ndarray:
-        """JT of order 2 at ``theta`` moved by each row of ``steps`` (b, d) whole search pixels: (b,);
-        ``-inf`` where fewer than ``min_overlap`` (default: the instance's) of the samples are inside."""
-        values, inside = self.scores_and_overlaps(theta, steps)
-        min_overlap = self.min_overlap if min_overlap is None else min_overlap
-        return np.where((inside >= min_overlap) & (inside > 0) & np.isfinite(values), values, -np.inf)
-
     def scores_and_overlaps(self, theta: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """JT of order 2 (NaN without samples inside) and the fraction of the samples inside, (b,) each."""
         K, b = self.K, len(steps)
@@ -135,7 +120,8 @@ class SearchImages:
 
     def score(self, theta: np.ndarray, *, min_overlap: float | None = None) -> float:
         """JT of order 2 of one transform (``-inf`` below ``min_overlap``, default: the instance's)."""
-        return float(self.score_steps(theta, np.zeros((1, self.dim), dtype=np.intp), min_overlap=min_overlap)[0])
+        values, inside = self.scores_and_overlaps(theta, np.zeros((1, self.dim), dtype=np.intp))
+        return float(_accepted(values, inside, self.min_overlap if min_overlap is None else min_overlap)[0])
 
     def content_overlap(self, theta: np.ndarray) -> float:
         """Fraction of the fixed image's content (Otsu foreground) mapped onto the moving image's content."""
@@ -146,21 +132,10 @@ class SearchImages:
 
 @dataclass(frozen=True, eq=False)
 class GridSearch:
-    """A scored grid of transforms.
-
-    Attributes
-    ----------
-    thetas : ndarray, shape (B, p)
-        Parameters of every grid transform.
-    raw, overlaps : ndarray, shape (B,)
-        Their search scores (NaN without a sample inside) and the fractions of the samples inside.
-    spacing : float
-        Translation step of the grid (physical units).
-    n_coarse : int
-        The first ``n_coarse`` rows are the regular grid, the rest polished points.
-    min_overlap : float
-        The overlap bound of :attr:`values`.
-    """
+    """A scored grid of transforms: parameters ``thetas`` (B, p), their search scores ``raw`` (B,; NaN without a
+    sample inside) and fractions of the samples inside ``overlaps`` (B,), the grid's translation step ``spacing``
+    (physical units); the first ``n_coarse`` rows are the regular grid, the rest polished points; ``min_overlap``:
+    the overlap bound of :attr:`values`."""
 
     thetas: np.ndarray
     raw: np.ndarray
@@ -171,8 +146,7 @@ class GridSearch:
 
     def values_at(self, min_overlap: float) -> np.ndarray:
         """The scores, ``-inf`` where fewer than ``min_overlap`` of the samples are inside."""
-        ok = (self.overlaps >= min_overlap) & (self.overlaps > 0) & np.isfinite(self.raw)
-        return np.where(ok, self.raw, -np.inf)
+        return _accepted(self.raw, self.overlaps, min_overlap)
 
     @property
     def values(self) -> np.ndarray:
@@ -251,13 +225,7 @@ def flatness(score: Callable[[np.ndarray], float], theta: np.ndarray, *, dim: in
     ``score(theta) - mean(score(theta +- reach u))``: at ``reach`` a determined optimum has fallen in every
     direction, an undetermined one has not in its flat direction. (A direction fitted to the local curvature
     was tried and dropped: on coarse copies of real images it found valleys that correct results sit in.)
-
-    Returns
-    -------
-    ratio : float
-        The smallest drop over the largest (clipped to [0, 1]).
-    direction : ndarray, shape (p,)
-        The flattest direction (arcs, translation).
+    Returns the smallest drop over the largest (clipped to [0, 1]) and the flattest direction (p,).
     """
     theta = np.asarray(theta, dtype=np.float64)
     k, p = n_angles(dim), len(theta)
