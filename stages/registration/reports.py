@@ -1,14 +1,6 @@
-"""Reports of the registration experiments (thesis ch. 2): figures and tables.
-
-- ``bernoulli_entropy`` (Fig. 2.2) and ``bernoulli_jt`` (Fig. 2.3): analytic curves, no items needed;
-- ``conditional_distributions`` (Figs. 2.4-2.5): rows of the joint histogram of an image and the
-  same image moved by a few transforms;
-- ``registration_bars`` (Figs. 2.6-2.8): recovered parameters and errors per measure, per true
-  misalignment, one figure per reference image;
-- ``landscape_plot`` (Figs. 2.9-2.15): the measure along each parameter, one line per alpha;
-- ``registration_overlay``: fixed, moving, checkerboards before/after and a colour overlay;
-- ``registration_table``: one row per item and registration method (estimate, truth, errors, time);
-- ``accuracy_summary``: success rate, median error and time per method (and per input pair).
+"""Reports of the registration experiments (thesis ch. 2): the figures 2.2-2.15 (analytic curves, conditional
+distributions, recovered parameters, landscapes), overlays of registered pairs, and tables of the registrations
+and of their accuracy per method.
 """
 
 from __future__ import annotations
@@ -37,9 +29,7 @@ def _stem(path: str) -> str:
 
 def _label(r) -> str:
     """Short input label of an item: 'fixed|moving' stems for pairs, the stem for images."""
-    text = r.input_label or r.input_path
-    parts = [_stem(p) for p in str(text).split("|")]
-    return "|".join(parts)
+    return "|".join(_stem(p) for p in str(r.input_label or r.input_path).split("|"))
 
 
 def _of_type(r, cls: type) -> list:
@@ -72,8 +62,7 @@ def bernoulli_entropy_report(experiment, results, params: BernoulliEntropyParams
         ax.plot(p, h, label=f"alpha = {alpha:g}" + (" (Shannon)" if alpha == 1 else ""))
         rows.append({"alpha": alpha, "max": float(h.max()), "argmax_p": float(p[np.argmax(h)]),
                      "max_exact": float((2 ** (1 - alpha) - 1) / (1 - alpha)) if alpha != 1 else math.log(2)})
-    ax.set_xlabel("p")
-    ax.set_ylabel("H_alpha(p, 1 - p)")
+    ax.set(xlabel="p", ylabel="H_alpha(p, 1 - p)")
     ax.set_title("Tsallis entropy of a Bernoulli distribution (thesis Fig. 2.2)", fontsize=9)
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
@@ -105,16 +94,13 @@ def bernoulli_jt_report(experiment, results, params: BernoulliJTParams) -> Repor
         jt = tsallis_entropy(0.5 * (P1 + P2), alpha) - 0.5 * (tsallis_entropy(P1, alpha) + tsallis_entropy(P2, alpha))
         ax = fig.add_subplot(2, n, k + 1, projection="3d")
         ax.plot_surface(p, q, jt, cmap="viridis", linewidth=0, antialiased=True)
-        ax.set_xlabel("p")
-        ax.set_ylabel("q")
+        ax.set(xlabel="p", ylabel="q")
         ax.set_title(f"JT, alpha = {alpha:g}", fontsize=9)
         ax2 = fig.add_subplot(2, n, n + k + 1)
         cs = ax2.contour(p, q, jt, levels=12, cmap="viridis")
         ax2.clabel(cs, fontsize=6)
         fig.colorbar(cs, ax=ax2, shrink=0.8, label=f"JT (alpha = {alpha:g})")
-        ax2.set_xlabel("p")
-        ax2.set_ylabel("q")
-        ax2.set_aspect("equal")
+        ax2.set(xlabel="p", ylabel="q", aspect="equal")
         rows.append({"alpha": alpha, "max": float(jt.max()), "at_p": float(p.flat[np.argmax(jt)]),
                      "at_q": float(q.flat[np.argmax(jt)]), "min_on_diagonal": float(np.abs(np.diag(jt)).max())})
     fig.suptitle("Jensen-Tsallis divergence of (p, 1-p) and (q, 1-q), equal weights (thesis Fig. 2.3): "
@@ -165,15 +151,12 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
             ax = axes[0][k]
             ax.imshow(full, cmap="magma", aspect="auto", origin="lower", vmin=0, vmax=1)
             ax.set_title(f"theta = {tuple(float(t) for t in theta)}\nJT(alpha={params.alpha:g}) = {jt:.3f}", fontsize=8)
-            ax.set_xlabel("target bin j")
-            ax.set_ylabel("reference bin i")
+            ax.set(xlabel="target bin j", ylabel="reference bin i")
             ax = axes[1][k]
             top = np.argsort(w)[::-1][: params.rows_shown]
             for i in sorted(top):
                 ax.plot(P[i], lw=1)
-            ax.set_xlabel("target bin j")
-            ax.set_ylabel("p_ij")
-            ax.set_ylim(0, 1.02)
+            ax.set(xlabel="target bin j", ylabel="p_ij", ylim=(0, 1.02))
             ax.set_title(f"{len(top)} most frequent rows", fontsize=8)
             table.append({"input": _label(r), **dict(zip(t.names, theta)), "jt": jt,
                           "mean_row_max": float((w * P.max(axis=1)).sum())})
@@ -236,8 +219,7 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
             axes[0][c].set_xticks(x, names)
             axes[1][c].set_xticks(x, [f"|{n} err|" for n in names])
             axes[0][c].set_title(f"true ({', '.join(f'{n} {v:g}' for n, v in zip(names, truth))}) (dashed)", fontsize=8)
-            axes[1][c].set_yscale("log")
-            axes[1][c].set_ylim(1e-4, 100)
+            axes[1][c].set(yscale="log", ylim=(1e-4, 100))
             axes[1][c].axhline(1.0, color="0.5", lw=0.6)
         axes[0][0].set_ylabel("recovered (deg, px)")
         axes[1][0].set_ylabel("absolute error (log)")
@@ -384,8 +366,7 @@ def registered_items(results, method: str, limit: int) -> list[tuple[Any, Any]]:
     for r in results:
         if not r.ok or r.final("fixed") is None or r.final("moving") is None:
             continue
-        regs = [res.registration for res in r.results.values() if isinstance(res, RegisterResult)
-                and method in res.registration.method]
+        regs = [res.registration for res in _of_type(r, RegisterResult) if method in res.registration.method]
         if regs:
             chosen.append((r, regs[-1]))
     return chosen[:limit]
@@ -425,15 +406,12 @@ def registration_table_report(experiment, results, params: RegistrationTablePara
     rows = []
     for r in results:
         evals = _of_type(r, EvaluateResult)
-        regs = [res.registration for res in _of_type(r, RegisterResult)]
-        for k, reg in enumerate(regs):
+        for reg in (res.registration for res in _of_type(r, RegisterResult)):
             ev = next((e for e in evals if e.method == reg.method), None)
             row = {"item": r.item_id, "input": _label(r), "method": reg.method, **reg.transform.degrees()}
             if ev is not None:
                 row.update({f"true_{k}": v for k, v in ev.truth.items()})
-                row.update({**{f"d_{k}": v for k, v in ev.errors.items()}, "d_rotation": ev.d_rotation,
-                            "d_translation": ev.d_translation, "tre_mean": ev.tre_mean, "tre_max": ev.tre_max,
-                            "success": ev.success})
+                row.update({k: v for k, v in ev.summary().items() if k not in ("method", "flagged", "seconds")})
             row.update({"ok": reg.ok, "reason": reg.reason, "iterations": reg.iterations,
                         "evaluations": reg.evaluations, "seconds": reg.seconds})
             rows.append(row)
@@ -500,8 +478,7 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
     for ax in axes:
         ax.set_yticks(range(len(methods)), methods, fontsize=8)
         ax.grid(alpha=0.3)
-    axes[0].set_xscale("log")
-    axes[0].set_xlim(1e-3, 1e4)
+    axes[0].set(xscale="log", xlim=(1e-3, 1e4))
     axes[0].axvline(params.threshold, color="r", lw=0.8)
     axes[0].set_xlabel("mean target registration error (px or mm, log); success rate on the right")
     axes[1].set_xlabel("seconds per registration")
