@@ -86,21 +86,9 @@ def jensen_renyi(P: np.ndarray, weights: np.ndarray, alpha: float) -> float:
 
 
 def conditionals(h: np.ndarray, weights: Weights = "histogram") -> tuple[np.ndarray, np.ndarray]:
-    """Conditional distributions (normalised non-empty rows) of a joint histogram and their weights.
-
-    Parameters
-    ----------
-    h : ndarray, shape (n, k)
-        Joint histogram (counts or probabilities), rows = reference bins.
-    weights : {'histogram', 'uniform'}
-
-    Returns
-    -------
-    P : ndarray, shape (n', k)
-        Rows of ``h`` with a positive sum, each normalised to sum 1.
-    w : ndarray, shape (n',)
-        Their weights (sum 1). Both empty if ``h`` has no mass.
-    """
+    """Conditional distributions of a joint histogram ``h`` (n, k; counts or probabilities, rows = reference bins):
+    its rows with a positive sum, each normalised to sum 1, ``P`` (n', k), and their weights ``w`` (n',; sum 1);
+    both empty if ``h`` has no mass."""
     h = np.asarray(h, dtype=np.float64)
     rows = h.sum(axis=1)
     keep = rows > 0

@@ -37,13 +37,7 @@ class EvaluateParams(Params):
 
 
 def truth_transform(truth: dict[str, Any] | None, fixed: Image) -> RigidTransform:
-    """The known transform about the fixed grid's centre.
-
-    Raises
-    ------
-    StageError
-        No truth, unknown keys or non-numeric values.
-    """
+    """The known transform about the fixed grid's centre (StageError: no truth, unknown keys, non-numeric values)."""
     if not truth:
         raise StageError("evaluate needs a known transform: give pairs[].truth, pairs_csv.truth_columns, "
                          "or a misalign stage before it")
@@ -68,24 +62,10 @@ def tre_points(fixed: Image, region: str | None = None, max_points: int = 50000)
 
 @dataclass(frozen=True, eq=False)
 class EvaluateResult(StageResult):
-    """Errors of one registration against the truth.
-
-    Attributes
-    ----------
-    method : str
-    errors : dict
-        Estimate minus truth per parameter name (angles in degrees, wrapped).
-    d_rotation : float
-        Angle of the rotation between estimate and truth (degrees).
-    d_translation : float
-        Length of the difference of the translations (about the fixed centre).
-    tre_mean, tre_max : float
-    success, flagged : bool
-        ``tre_mean <= threshold``; the registration's own self-check failed.
-    seconds : float
-    truth : dict
-        The true parameters by name (angles in degrees).
-    """
+    """Errors of one registration against the truth: ``errors`` estimate minus truth per parameter name (angles in
+    degrees, wrapped); ``d_rotation`` the angle of the rotation between them (degrees); ``d_translation`` the length
+    of the translations' difference (about the fixed centre); ``success`` ``tre_mean <= threshold``; ``flagged``
+    the registration's own self-check failed; ``truth`` the true parameters by name (angles in degrees)."""
 
     method: str
     errors: dict[str, float]

@@ -73,23 +73,12 @@ class Binning:
 
 
 class JointHistogram:
-    """Joint histograms of ``(fixed(p), moving(T(p)))`` for many rigid transforms T.
+    """Joint histograms of ``(fixed(p), moving(T(p)))`` for many rigid transforms ``T(p) = R (p - c) + c + t``.
 
-    Parameters
-    ----------
-    fixed, moving : Image
-        The images at this resolution (any pyramid level; both in physical space).
-    fixed_binning, moving_binning : Binning
-        Usually over the full-resolution images' ranges.
-    center : sequence of d floats
-        Rotation centre c of ``T(p) = R (p - c) + c + t``.
-    mode : {'linear', 'parzen', 'pv'}
-    samples : int, optional
-        At most this many fixed pixels (a random subset drawn once with ``seed``).
-    mask : ndarray of bool, optional
-        Fixed pixels (of this grid) that may be sampled.
-    jitter : bool
-        Move each sample by a fixed random offset within its pixel.
+    The images at this resolution (any pyramid level), binned by ``fixed_binning`` and ``moving_binning`` (usually
+    over the full-resolution images' ranges); ``center``: c (d,); the fixed samples: the pixels of ``mask`` (bool,
+    this grid; default all), at most ``samples`` of them (a random subset drawn once with ``seed``), each moved
+    by a fixed random offset within its pixel with ``jitter``.
     """
 
     def __init__(self, fixed: Image, moving: Image, fixed_binning: Binning, moving_binning: Binning, *, center,

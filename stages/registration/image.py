@@ -22,19 +22,10 @@ import numpy as np
 
 @dataclass(frozen=True, eq=False)
 class Image:
-    """A 2D or 3D grey-level image with its physical grid.
-
-    Attributes
-    ----------
-    data : ndarray, shape (H, W) or (K, J, I), float64
-        Intensities in SimpleITK's array order, C-contiguous.
-    spacing, origin : tuple of d floats
-        Pixel size and the position of pixel 0, ITK order ``(x, y[, z])`` (default 1 and 0).
-    direction : ndarray, shape (d, d)
-        Grid axes as columns (default: identity).
-    name, source : str
-        File name without suffix; where the image came from.
-    """
+    """A 2D or 3D grey-level image with its physical grid: ``data`` (H, W) or (K, J, I), float64 in SimpleITK's
+    array order, C-contiguous; ``spacing`` and ``origin`` (d,): pixel size and the position of pixel 0, ITK order
+    ``(x, y[, z])`` (default 1 and 0); ``direction`` (d, d): grid axes as columns (default: identity); ``name``:
+    the file name without suffix; ``source``: where the image came from."""
 
     data: np.ndarray
     spacing: tuple[float, ...] | None = None

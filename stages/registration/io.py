@@ -23,13 +23,8 @@ from topomatch.stages.registration.transform import RigidTransform
 
 
 def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
-    """``arr`` as float64 after the checks every registration input needs.
-
-    Raises
-    ------
-    InputError
-        Empty, non-numeric, NaN/infinite, constant, or fewer than 4 pixels along an axis.
-    """
+    """``arr`` as float64 after the checks every registration input needs (InputError: empty, non-numeric,
+    NaN/infinite, constant, or fewer than 4 pixels along an axis)."""
     if arr.size == 0 or 0 in arr.shape:
         raise InputError(path, f"image is empty (shape {arr.shape})")
     if not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
@@ -53,22 +48,12 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
 
 
 def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 0, strict_slice: bool = True) -> Image:
-    """Read a 2D image or a 3D volume (or one 2D slice of a volume) with its physical geometry.
+    """Read a 2D image or a 3D volume (or one 2D slice of a volume) with its physical geometry: a PNG, TIFF, JPEG,
+    BMP, NIfTI, MetaImage, NRRD, DICOM file or DICOM series folder (InputError naming the file: module docstring).
 
-    Parameters
-    ----------
-    path : str or Path
-        PNG, TIFF, JPEG, BMP, NIfTI, MetaImage, NRRD, DICOM file, or a DICOM series folder.
-    slice_index : int, optional
-        For a volume: the 2D slice to take along ``axis`` of its ``(k, j, i)`` array (negative counts from
-        the end). For a 2D image an error, unless ``strict_slice`` is False (then ignored: a config's slice
-        applies to its volumes, so that one config can mix volumes and PNGs).
-    axis : {0, 1, 2}
-
-    Raises
-    ------
-    InputError
-        See the module docstring; the message names the file.
+    ``slice_index``: for a volume, the 2D slice to take along ``axis`` of its ``(k, j, i)`` array (negative counts
+    from the end); for a 2D image an error, unless ``strict_slice`` is False (then ignored: a config's slice
+    applies to its volumes, so that one config can mix volumes and PNGs).
     """
     path = Path(path)
     arr, spacing, origin, direction = read_array(path)

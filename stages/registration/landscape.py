@@ -39,20 +39,9 @@ class LandscapeParams(Params):
 
 @dataclass(frozen=True, eq=False)
 class LandscapeResult(StageResult):
-    """One scan per parameter.
-
-    Attributes
-    ----------
-    offsets : dict of ndarray
-        Per parameter name: the offsets from ``center`` (points,), degrees for angles.
-    values : dict of ndarray
-        Per parameter name: the measure, shape (len(alphas), points).
-    alphas : tuple of float
-    center : tuple of float
-        theta_0 (angles in degrees).
-    label : str
-        E.g. ``'jt, histogram weights'``.
-    """
+    """One scan per parameter: per parameter name the ``offsets`` from ``center`` (points,; degrees for angles)
+    and the measure's ``values`` (len(alphas), points); ``center``: theta_0 (angles in degrees); ``label``: e.g.
+    ``'jt, histogram weights'``."""
 
     offsets: dict[str, np.ndarray]
     values: dict[str, np.ndarray]

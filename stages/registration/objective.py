@@ -14,7 +14,6 @@ from __future__ import annotations
 import math
 from typing import Literal
 
-
 from topomatch.stages.registration.divergence import Metric, Weights, similarity
 from topomatch.stages.registration.histogram import JointHistogram
 
@@ -22,22 +21,11 @@ from topomatch.stages.registration.histogram import JointHistogram
 class Objective:
     """Similarity of fixed and transformed moving image at one resolution (callable on theta).
 
-    Parameters
-    ----------
-    histogram : JointHistogram
-        Anything with ``histogram(theta) -> (h, n_inside)``, ``n_samples`` and ``overlap(theta)``.
-    metric : {'jt', 'jr', 'mi', 'tmi'}
-    alpha : float
-        Order of the Tsallis / Renyi entropies (jt, jr, tmi).
-    weights : {'histogram', 'uniform'}
-        Weights of the Jensen divergences (jt, jr).
-    tmi_form : {'additive', 'relative'}
-    min_overlap : float
-        Smallest accepted fraction of fixed samples inside the moving image.
-    overlap_power : float
-        The measure is multiplied by (fraction of fixed samples inside) ** ``overlap_power`` (0: not):
-        samples that leave the moving image count as carrying no information, so a sliver of overlap
-        whose few samples happen to agree cannot outscore a wide one (coarse levels).
+    ``histogram``: anything with ``histogram(theta) -> (h, n_inside)``, ``n_samples`` and ``overlap(theta)``;
+    ``alpha``: the entropies' order (jt, jr, tmi); ``weights``: the Jensen divergences' (jt, jr). The measure is
+    multiplied by (fraction of fixed samples inside) ** ``overlap_power`` (0: not): samples that leave the moving
+    image count as carrying no information, so a sliver of overlap whose few samples happen to agree cannot
+    outscore a wide one (coarse levels).
     """
 
     def __init__(self, histogram: JointHistogram, metric: Metric = "jt", *, alpha: float = 2.0,

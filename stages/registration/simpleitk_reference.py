@@ -97,14 +97,9 @@ def _registration_method(params: "SimpleITKParams", F, M, transform):
 
 
 def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleITKParams()) -> Registration:
-    """Register with SimpleITK (Mattes MI, Euler2D / Euler3D, a pyramid), 2D or 3D, the images' geometry kept.
-
-    Returns
-    -------
-    Registration
-        ``transform`` about the fixed grid's centre; ``value`` is the final Mattes metric (negative MI, as
-        SimpleITK minimises it); flagged only for too little overlap or an exception (SimpleITK has no flag).
-    """
+    """Register with SimpleITK (Mattes MI, Euler2D / Euler3D, a pyramid), 2D or 3D, the images' geometry kept: the
+    transform about the fixed grid's centre, ``value`` the final Mattes metric (negative MI, as SimpleITK minimises
+    it), flagged only for too little overlap or an exception (SimpleITK has no flag)."""
     import SimpleITK as sitk
 
     t0 = time.perf_counter()

@@ -51,16 +51,9 @@ def euler_angles(R: np.ndarray) -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class RigidTransform:
-    """``T(p) = R(angles)(p - c) + c + t`` on physical points.
-
-    Attributes
-    ----------
-    parameters : tuple of 3 or 6 floats
-        SimpleITK's ``GetParameters()``: 2D ``(angle, tx, ty)``, 3D ``(ax, ay, az, tx, ty, tz)``; radians
-        and physical units.
-    center : tuple of 2 or 3 floats
-        The centre ``c``.
-    """
+    """``T(p) = R(angles)(p - c) + c + t`` on physical points about the centre ``c`` (2 or 3 floats); ``parameters``:
+    SimpleITK's ``GetParameters()``, 2D ``(angle, tx, ty)``, 3D ``(ax, ay, az, tx, ty, tz)``, radians and physical
+    units."""
 
     parameters: tuple[float, ...]
     center: tuple[float, ...]

@@ -65,15 +65,9 @@ def _reduced(a: np.ndarray, step: tuple[int, ...]) -> np.ndarray:
 
 
 def slice_viewer(fixed: np.ndarray, before: np.ndarray, after: np.ndarray, spacing, title: str, view_id: str) -> str:
-    """An HTML fragment: the viewer of one registration (module docstring).
-
-    Parameters
-    ----------
-    fixed, before, after : (H, W) or (K, J, I) arrays on the fixed grid
-        The fixed image and the moving image resampled on it before and after registration.
-    spacing : sequence of float
-        Sample spacing per array axis (same order), for the aspect ratio.
-    """
+    """An HTML fragment: the viewer of one registration (module docstring) of ``fixed`` and the moving image
+    resampled on its grid ``before`` and ``after`` registration, (H, W) or (K, J, I) each; ``spacing``: per array
+    axis (same order), for the aspect ratio."""
     fixed = np.asarray(fixed, dtype=np.float64)
     if fixed.ndim not in (2, 3) or before.shape != fixed.shape or after.shape != fixed.shape:
         raise ValueError(f"slice_viewer: fixed {fixed.shape}, before {before.shape}, after {after.shape}: "
