@@ -206,12 +206,12 @@ def foreground_mask(image: Image) -> np.ndarray:
     return ~above if share >= 0.9 else np.ones_like(above)
 
 
-def grow(mask: np.ndarray, distance: float, spacing) -> np.ndarray:
-    """``mask`` grown by ``distance`` physical units along every axis (a box of half-widths ``distance /
-    spacing`` pixels, rounded: Chebyshev, not Euclidean, distance), by running maxima along each axis in numpy
-    (scipy's distance transform would cost a 3D registration a tenth of a second of import)."""
+def grow(mask: np.ndarray, distance: float, spacing=None) -> np.ndarray:
+    """``mask`` grown by ``distance`` physical units (default spacing 1: pixels) along every axis (a box of
+    half-widths ``distance / spacing`` pixels, rounded: Chebyshev, not Euclidean, distance), by running maxima
+    along each axis in numpy (scipy's distance transform would cost a 3D registration a tenth of a second of import)."""
     out = np.asarray(mask, dtype=bool).copy()
-    for axis, s in enumerate(spacing[::-1]):  # array axis, its spacing
+    for axis, s in enumerate((1.0,) * out.ndim if spacing is None else spacing[::-1]):  # array axis, its spacing
         r = int(round(distance / s))
         grown = out.copy()
         for shift in range(1, r + 1):

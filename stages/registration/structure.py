@@ -1,14 +1,6 @@
-"""How much of an image's structure lies inside its outline (a mask or silhouette has none), and how far apart
-two objects' outlines lie under a transform.
-
-A moving image whose only structure is the object's outline (a binary mask, a silhouette) pins a rigid
-transform only as well as its outline corresponds to the other image's; the self-check's ``outline`` test
-(``register.check_outline``) asks :func:`interior_structure` whether a pair is such, and then
-:func:`outline_gap` whether the outlines correspond at the result. ``interior_structure`` is the mean gradient
-magnitude inside the object (its Otsu content closed, holes filled, eroded) over that on the object's outline,
-on the image block-averaged by 2 and smoothed by one pixel. On the corpus's tune split (``docs/registration.md``)
-silhouettes scored 0.009-0.03 (three outliers higher), T1, T2, label maps and thresholded images 0.07-0.6, PD
-images 0.04-0.4 and saturated ones 0.01-0.3 (nearly uniform inside); masks made from the ITK slices 0-0.03.
+"""The outline-only tests of the self-check (``register.OUTLINE_TESTS``, ``register.check_outline``): how much
+of an image's structure lies inside its outline (a mask or silhouette has none), and how far apart two objects'
+outlines lie under a transform. Their thresholds and the scores on the corpus: docs/registration.md.
 
 Written with numpy (box grows, a geodesic flood fill, ``image.gaussian_blur``): ``scipy.ndimage`` would cost
 a 2D registration 0.12-0.18 s of import, as much as the registration.
@@ -46,9 +38,8 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
             index = [slice(None)] * mask.ndim
             index[axis] = end
             outside[tuple(index)] = free[tuple(index)]
-    unit = (1.0,) * mask.ndim
     while True:  # geodesic dilation of the border's background inside the background
-        grown = grow(outside, 1.0, unit) & free
+        grown = grow(outside, 1.0) & free
         if np.array_equal(grown, outside):
             return ~outside
         outside = grown
@@ -72,8 +63,7 @@ def once_per_image(compute):
 def object_mask(image: Image) -> np.ndarray:
     """The object of ``image`` (bool, its shape): the content (:func:`~.image.foreground_mask`) closed by
     :data:`CLOSING` pixels with its holes filled. Computed once per image."""
-    unit = (1.0,) * image.dim
-    return fill_holes(~grow(~grow(foreground_mask(image), CLOSING, unit), CLOSING, unit))
+    return fill_holes(~grow(~grow(foreground_mask(image), CLOSING), CLOSING))
 
 
 @once_per_image
@@ -115,9 +105,7 @@ def interior_structure(image: Image) -> float:
     (an object smaller than the band, or filling the grid)."""
     small = analysed_copy(image)
     obj = object_mask(small)
-    unit = (1.0,) * small.dim
-    band = grow(obj, BAND, unit) & grow(~obj, BAND, unit)
-    inside = ~grow(~obj, ERODE, unit)
+    band, inside = grow(obj, BAND) & grow(~obj, BAND), ~grow(~obj, ERODE)
     if band.sum() < 10 or inside.sum() < 10:
         return float("nan")
     gradient = np.gradient(gaussian_blur(small.data, [1.0] * small.dim, truncate=3.0)) if min(small.data.shape) > 1 else [np.zeros_like(small.data)]
@@ -141,8 +129,7 @@ def interior_spread(image: Image) -> float:
     binary image whose object has dark regions inside (a thresholded image) has structure inside, and 0 spread."""
     small = analysed_copy(image)
     content = foreground_mask(small)
-    unit = (1.0,) * small.dim
-    core, back = ~grow(~content, 1.0, unit), ~grow(content, 1.0, unit)
+    core, back = ~grow(~content, 1.0), ~grow(content, 1.0)
     obj = object_mask(small)
     if core.sum() < 10 or back.sum() < 10 or (content & obj).sum() < SOLID * obj.sum():
         return float("nan")
@@ -177,8 +164,7 @@ def outline_gap(fixed: Image, moving: Image, transform: RigidTransform) -> float
     defined. A mask grown by r against itself scores r; identical objects score about a third of a pixel after a
     rotation (the pixel grid); NaN when the fixed object has no outline there."""
     fixed_object, moving_object = object_mask(fixed), object_mask(moving)
-    unit = (1.0,) * fixed.dim
-    near = np.flatnonzero(grow(fixed_object, GAP_BAND, unit) & grow(~fixed_object, GAP_BAND, unit))
+    near = np.flatnonzero(grow(fixed_object, GAP_BAND) & grow(~fixed_object, GAP_BAND))
     mapped = resample(moving.with_data(moving_object.astype(np.float64)), transform, fixed, fill=np.nan, flat=near)
     defined = np.isfinite(mapped)
     slope = np.sqrt(sum(g ** 2 for g in np.gradient(fixed_object.astype(np.float64), *fixed.spacing[::-1])))
