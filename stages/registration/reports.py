@@ -13,9 +13,13 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import Params, ReportOutput, report
+from topomatch.stages.registration.divergence import conditionals, jensen_tsallis_histogram, tsallis_entropy
 from topomatch.stages.registration.evaluate import EvaluateResult
+from topomatch.stages.registration.histogram import Binning, JointHistogram
+from topomatch.stages.registration.interpolation import resample
 from topomatch.stages.registration.landscape import LandscapeResult
-from topomatch.stages.registration.register import RegisterResult
+from topomatch.stages.registration.register import RegisterResult, describe
+from topomatch.stages.registration.transform import RigidTransform
 
 _NAME = dict(pattern=r"^[A-Za-z0-9_.-]+$", description="file name of the figure or table")
 
@@ -51,8 +55,6 @@ def bernoulli_entropy_report(experiment, results, params: BernoulliEntropyParams
     """Fig. 2.2: Tsallis entropy of a Bernoulli distribution (p, 1 - p) for several alpha."""
     import matplotlib.pyplot as plt
 
-    from topomatch.stages.registration.divergence import tsallis_entropy
-
     p = np.linspace(0, 1, 401)
     P = np.column_stack([p, 1 - p])
     fig, ax = plt.subplots(figsize=(5.2, 3.8))
@@ -80,8 +82,6 @@ class BernoulliJTParams(Params):
 def bernoulli_jt_report(experiment, results, params: BernoulliJTParams) -> ReportOutput:
     """Fig. 2.3: Jensen-Tsallis divergence of two Bernoulli distributions, equal weights (surface and contours)."""
     import matplotlib.pyplot as plt
-
-    from topomatch.stages.registration.divergence import tsallis_entropy
 
     g = np.linspace(0, 1, params.points)
     p, q = np.meshgrid(g, g, indexing="ij")
@@ -126,10 +126,6 @@ class ConditionalParams(Params):
 def conditional_distributions_report(experiment, results, params: ConditionalParams) -> ReportOutput:
     """Figs. 2.4-2.5: conditional distributions p_i of an image against itself moved by a few transforms."""
     import matplotlib.pyplot as plt
-
-    from topomatch.stages.registration.divergence import conditionals, jensen_tsallis_histogram
-    from topomatch.stages.registration.histogram import Binning, JointHistogram
-    from topomatch.stages.registration.transform import RigidTransform
 
     figures, table = {}, []
     for r in results:
@@ -316,9 +312,6 @@ def planes(image) -> list[tuple[str, np.ndarray, float]]:
 def before_after(fixed, moving, transform, flat: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The moving image on the fixed grid (or at its pixels ``flat``) before (the files' own placement: the
     identity) and after ``transform``, resampled in physical space, the moving minimum outside it."""
-    from topomatch.stages.registration.interpolation import resample
-    from topomatch.stages.registration.transform import RigidTransform
-
     fill = float(moving.data.min())
     return tuple(resample(moving, t, fixed, fill=fill, flat=flat)  # type: ignore[return-value]
                  for t in (RigidTransform.identity(tuple(fixed.center)), transform))
@@ -327,8 +320,6 @@ def before_after(fixed, moving, transform, flat: np.ndarray | None = None) -> tu
 def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
     """Per view of :func:`planes`, a row of five panels on ``axes`` (rows x 5): fixed, moving, checkerboards
     before and after, colour overlay after."""
-    from topomatch.stages.registration.register import describe
-
     for row, ((label, flat, aspect), (_, own, own_aspect)) in enumerate(zip(planes(fixed), planes(moving))):
         f = fixed.data.ravel()[flat]
         before, after = before_after(fixed, moving, registration.transform, flat)

@@ -20,6 +20,8 @@ import numpy as np
 from pydantic import Field
 
 from topomatch.pipeline.contract import Params, ReportOutput, report
+from topomatch.stages.registration.register import describe
+from topomatch.stages.registration.reports import before_after, registered_items
 
 #: Largest number of samples per axis, and in all, kept in a page (a volume of 128 x 128 x 62 voxels
 #: becomes about 300,000 samples: three images of that size travel as about 1.2 MB of base64).
@@ -60,10 +62,6 @@ def _bytes(a: np.ndarray, lo: float, hi: float) -> str:
     return base64.b64encode(np.round(255 * u).astype(np.uint8).tobytes()).decode()
 
 
-def _reduced(a: np.ndarray, step: tuple[int, ...]) -> np.ndarray:
-    return np.ascontiguousarray(a[tuple(slice(None, None, s) for s in step)])
-
-
 def slice_viewer(fixed: np.ndarray, before: np.ndarray, after: np.ndarray, spacing, title: str, view_id: str) -> str:
     """An HTML fragment: the viewer of one registration (module docstring) of ``fixed`` and the moving image
     resampled on its grid ``before`` and ``after`` registration, (H, W) or (K, J, I) each; ``spacing``: per array
@@ -76,8 +74,8 @@ def slice_viewer(fixed: np.ndarray, before: np.ndarray, after: np.ndarray, spaci
     while np.prod([-(-s // k) for s, k in zip(fixed.shape, step)]) > MAX_SAMPLES:  # thin the longest axis
         longest = int(np.argmax([s * sp / k for s, sp, k in zip(fixed.shape, spacing, step)]))
         step[longest] += 1
-    step = tuple(step)
-    fixed, before, after = (_reduced(a, step) for a in (fixed, np.asarray(before), np.asarray(after)))
+    keep = tuple(slice(None, None, k) for k in step)
+    fixed, before, after = (np.ascontiguousarray(np.asarray(a)[keep]) for a in (fixed, before, after))
     spacing = [float(s) * k for s, k in zip(spacing, step)]
     lo, hi = (float(np.percentile(fixed, q)) for q in (0.5, 99.5))
     mlo, mhi = (float(np.percentile(np.concatenate([before.ravel(), after.ravel()]), q)) for q in (0.5, 99.5))
@@ -115,9 +113,6 @@ class SliceViewerParams(Params):
 @report("registration_viewer", params=SliceViewerParams)
 def registration_viewer_report(experiment, results, params: SliceViewerParams) -> ReportOutput:
     """Interactive viewers of registered pairs: fixed and moving (before or after) with an opacity slider."""
-    from topomatch.stages.registration.register import describe
-    from topomatch.stages.registration.reports import before_after, registered_items
-
     fragments = []
     for r, reg in registered_items(results, params.method, params.max_items):
         fixed = r.final("fixed")
