@@ -1,7 +1,4 @@
-"""Rigid 2D image registration (thesis ch. 2): image io, rigid transforms in ITK's convention,
-interpolation, joint histograms, entropic divergences (Jensen-Tsallis, Jensen-Renyi, MI,
-Tsallis MI), SPSA and Powell optimisers, coarse-to-fine registration, evaluation against a
-known transform, synthetic misalignments, objective landscapes and a SimpleITK reference.
-
+"""Rigid registration of 2D images and 3D volumes (thesis ch. 2) by entropic measures of the joint histogram, with
+its inputs, self-check, evaluation, synthetic misalignments, landscapes, reports and a SimpleITK reference.
 See ``docs/registration.md`` for the conventions and the measured accuracy and speed.
 """

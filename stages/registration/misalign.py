@@ -7,9 +7,8 @@ N-linear interpolation the registration uses, so the test is not answered by the
 A case may also get another contrast (:func:`t2_like`), be cropped to a slab (:func:`crop_slab`) and get
 Gaussian noise.
 
-Random cases draw the translation uniformly in ``[-max_translation, max_translation]`` per axis, then each
-angle uniformly in ``[-max_angle, max_angle]``, from ``numpy.random.default_rng([seed, index])``: case
-``index`` of a sweep is the same whatever the other cases are.
+Random case ``index`` of a sweep (:func:`random_transform`) is drawn from ``numpy.random.default_rng([seed,
+index])``: the same whatever the other cases are.
 """
 
 from __future__ import annotations
@@ -43,7 +42,7 @@ def moved(source: Image, transform: RigidTransform, *, order: int = 3, noise: fl
     if noise > 0:
         rng = rng if rng is not None else np.random.default_rng(0)
         data = data + rng.normal(0.0, noise * (source.data.max() - source.data.min()), size=data.shape)
-    values = ", ".join(f"{n} {v:g}" for n, v in zip(transform.names, (*transform.angles_deg, *transform.translation)))
+    values = ", ".join(f"{n} {v:g}" for n, v in transform.degrees().items())
     return source.with_data(data, name=f"{source.name}_moved", source=f"{source.name} moved by ({values})")
 
 

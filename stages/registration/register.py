@@ -481,8 +481,7 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
         return []
     finest = run.levels[-1]
     jt = Objective(finest.objective.histogram, "jt", alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
-    lower, upper = run.lower, run.upper
-    end = run.optimize(len(run.levels) - 1, finest.spec, theta, lower=lower, upper=upper, objective=jt).theta
+    end = run.optimize(len(run.levels) - 1, finest.spec, theta, lower=run.lower, upper=run.upper, objective=jt).theta
     run.measures["agreement"] = run.distance(end, theta) if jt(end) > jt(theta) else 0.0
     if run.measures["agreement"] <= limit:
         return []
@@ -650,10 +649,9 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
                             f"a local optimum; the misalignment is probably outside the capture range")]
 
 
-CHECKS: tuple[Callable[..., list[Flag]], ...] = (check_start, check_overlap, check_bounds, check_chance, check_gain,
-                                                  check_consistency, check_stability, check_agreement,
-                                                  check_overlap_bound,
-                                                  check_content, check_outline, check_prominence, check_flatness, check_capture)
+CHECKS: tuple[Callable[..., list[Flag]], ...] = (
+    check_start, check_overlap, check_bounds, check_chance, check_gain, check_consistency, check_stability,
+    check_agreement, check_overlap_bound, check_content, check_outline, check_prominence, check_flatness, check_capture)
 """The self-check, in order; after ``check_overlap`` flags an undefined measure nothing else is asked."""
 
 

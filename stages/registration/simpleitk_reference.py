@@ -20,6 +20,7 @@ from pydantic import Field, model_validator
 
 from topomatch.pipeline.contract import Params, stage
 from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.interpolation import inside
 from topomatch.stages.registration.io import to_sitk
 from topomatch.stages.registration.register import Flag, Registration, RegisterResult
 from topomatch.stages.registration.transform import RigidTransform
@@ -117,7 +118,7 @@ def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleI
                             time.perf_counter() - t0, iterations[0], iterations[0], "exception", initial=start)
     seconds = time.perf_counter() - t0
     index = moving.continuous_index(transform.apply(fixed.points(np.arange(0, fixed.data.size, 7))))
-    overlap = float(np.mean(((index >= 0) & (index <= np.asarray(moving.size) - 1.0)).all(axis=1)))
+    overlap = float(np.mean(inside(index.T, moving.size)))
     flags = () if overlap >= params.min_overlap else (
         Flag("overlap", f"only {overlap:.0%} of the fixed image overlaps the moving image at the result"),)
     return Registration(transform, float(reg.GetMetricValue()), flags, method, seconds, iterations[0], iterations[0],
