@@ -88,7 +88,6 @@ class JointHistogram:
             raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         rng = np.random.default_rng(seed)
         self.dim, self.mode = fixed.dim, mode
-        self.fixed_binning, self.moving_binning = fixed_binning, moving_binning
         self.center = np.asarray(center, dtype=np.float64)
         self.shape = (fixed_binning.bins, moving_binning.bins)
         self.n_cells = fixed_binning.bins * moving_binning.bins
@@ -108,8 +107,7 @@ class JointHistogram:
         P = np.zeros((3, self.n_samples))
         P[: self.dim] = (fixed.physical(idx.T) - self.center).T
         self._P = P  # (3, n): a 2D image is a 3D image of one slice for the compiled pass
-        self.fixed_bins = fixed_binning.index(values)
-        self._fbk = np.ascontiguousarray(self.fixed_bins * moving_binning.bins, dtype=np.int64)
+        self._fbk = np.ascontiguousarray(fixed_binning.index(values) * moving_binning.bins, dtype=np.int64)
         self.moving = moving
         self._inv = np.linalg.inv(moving.index_matrix)
         self._size = tuple(moving.size) + (1,) * (3 - self.dim)
