@@ -165,10 +165,9 @@ class CheckSpec(Params):
     min_structure: float = Field(0.06, ge=0, allow_inf_nan=False,
                                  description="a pair in which either image has less structure inside its outline "
                                              "than this (interior over outline gradient, structure.py) is "
-                                             "outline-only (a mask, a silhouette): registered with "
-                                             "metric.outline_alpha and outline_smoothing, and flagged by "
-                                             "outline_gap and outline_drop (0: this test is off; min_spread is "
-                                             "the other)")
+                                             "outline-only (a mask, a silhouette): registered at "
+                                             "metric.outline_alpha with outline_smoothing, flagged by the outline "
+                                             "tests below (0: this test is off)")
     min_spread: float = Field(0.05, ge=0, allow_inf_nan=False,
                               description="a pair in which either image's intensities inside its object spread less "
                                           "than this fraction of the object's contrast (q90 - q10 over the "
@@ -234,9 +233,8 @@ class RegisterParams(Params):
     metric: MetricSpec = Field(default_factory=MetricSpec, description="the measure: name, alpha, weights, "
                                                                        "tmi_form, min_overlap")
     optimizer: OptimizerSpec = Field(default_factory=OptimizerSpec, description="spsa or powell, and SPSA's gains")
-    schedule: list[LevelSpec] = Field(default_factory=list, description="coarse-to-fine levels: spacing, bins, "
-                                      "iterations, step, c, average, gain_alpha, interpolation, samples, settle, "
-                                      "reruns (default: the dimension's, see docs/registration.md)")
+    schedule: list[LevelSpec] = Field(default_factory=list, description="coarse-to-fine levels, LevelSpec's "
+                                      "fields (default: the dimension's, docs/registration.md)")
     transform: TransformSpec = Field(default_factory=TransformSpec, description="initialisation of the transform")
     start: StartSpec = Field(default_factory=StartSpec, description="search for the start (3D default: steps 2)")
     bounds: BoundsSpec = Field(default_factory=BoundsSpec, description="search box: max_translation, max_angle")
