@@ -108,11 +108,8 @@ class Image:
                      self.source if source is None else source)
 
     def shrink(self, factors) -> "Image":
-        """Block average by integer ``factors`` (ITK order), trailing partial blocks dropped.
-
-        Pixel ``i`` of the result is the mean of its block, centred at the block's physical centre:
-        spacing ``s * f``, origin moved by ``(f - 1) / 2`` pixels.
-        """
+        """Block average by integer ``factors`` (ITK order), trailing partial blocks dropped: each pixel the mean of
+        its block at the block's physical centre (spacing ``s * f``, origin moved by ``(f - 1) / 2`` pixels)."""
         f = np.array([max(1, min(int(f), n)) for f, n in zip(factors, self.size)])
         if (f == 1).all():
             return self
@@ -169,11 +166,8 @@ Volume = Image
 
 
 def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
-    """Otsu's threshold (Otsu 1979: maximal between-class variance) of the values, on ``bins`` bins.
-
-    Written here (the same threshold as SimpleITK's ``OtsuThreshold``, tested) because importing
-    SimpleITK costs ~0.2 s, as much as a 2D registration.
-    """
+    """Otsu's threshold (Otsu 1979: maximal between-class variance) of the values, on ``bins`` bins: SimpleITK's
+    ``OtsuThreshold`` (tested) without its import (~0.2 s, as much as a 2D registration)."""
     counts, edges = np.histogram(values, bins=bins)
     centers = 0.5 * (edges[:-1] + edges[1:])
     w0 = np.cumsum(counts)[:-1].astype(np.float64)

@@ -181,11 +181,9 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
         if not r.ok:
             continue
         for ev in _of_type(r, EvaluateResult):
-            names = tuple(ev.truth)
-            t = tuple(ev.truth[n] for n in names)
-            est = tuple(ev.truth[n] + ev.errors[n] for n in names)
+            t, est = tuple(ev.truth.values()), tuple(ev.truth[n] + ev.errors[n] for n in ev.truth)
             data.setdefault(_label(r), {}).setdefault(tuple(round(v, 6) for v in t), {}).setdefault(
-                ev.method, []).append((names, t, est, ev, r.sweep.get("register.seed")))
+                ev.method, []).append((tuple(ev.truth), t, est, ev, r.sweep.get("register.seed")))
     figures, table = {}, []
     for image, cases in data.items():
         cols = len(cases)
@@ -441,9 +439,7 @@ def accuracy_rows(evaluations: list[tuple[str, Any]], threshold: float) -> list[
 @report("accuracy_summary", params=AccuracyParams)
 def accuracy_summary_report(experiment, results, params: AccuracyParams) -> ReportOutput:
     """Success rate (mean TRE <= threshold), median TRE and time per method, per input pair and overall.
-
-    A registration repeated across sweep points of a later stage (same pair, method and truth) counts once.
-    """
+    A registration repeated across sweep points of a later stage (same pair, method and truth) counts once."""
     import matplotlib.pyplot as plt
 
     evaluations, seen = [], set()

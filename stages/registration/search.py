@@ -28,11 +28,8 @@ SEARCH_SAMPLES = 4000
 
 
 def batch_jensen_tsallis2(h: np.ndarray) -> np.ndarray:
-    """JT (order 2, histogram weights) of a stack of joint histograms (B, fixed bins, moving bins): (B,).
-
-    Same value as :func:`~topomatch.stages.registration.divergence.jensen_tsallis_histogram` (tested);
-    NaN for an empty histogram.
-    """
+    """JT (order 2, histogram weights) of a stack of joint histograms (B, fixed bins, moving bins): (B,), the value
+    of :func:`~.divergence.jensen_tsallis_histogram` (tested); NaN for an empty histogram."""
     rows = h.sum(axis=2)
     N = rows.sum(axis=1)
     cols = h.sum(axis=1)

@@ -1,12 +1,11 @@
 """The reference: SimpleITK's Mattes mutual-information rigid registration of the same images, 2D or 3D.
 
 The textbook set-up (the SimpleITK notebooks' recipe): ``Euler2DTransform`` / ``Euler3DTransform`` centred by
-``CenteredTransformInitializer`` (``GEOMETRY`` or ``MOMENTS``), Mattes MI on a fixed-seed random sample,
-linear interpolation, physical-shift scales, a shrink/smoothing pyramid, and conjugate gradient with line search
-(2D default: the most accurate on the ITK cases), regular-step gradient descent (3D default) or gradient
-descent. The images keep their geometry (:func:`~topomatch.stages.registration.io.to_sitk`), so parameters
-compare directly with ours. SimpleITK reports no failure: a result is flagged only for too little overlap or an
-exception.
+``CenteredTransformInitializer`` (``GEOMETRY`` or ``MOMENTS``), Mattes MI on a fixed-seed random sample, linear
+interpolation, physical-shift scales, a shrink/smoothing pyramid (smoothing in physical units), and conjugate
+gradient with line search (2D default: the most accurate on the ITK cases), regular-step gradient descent (3D
+default) or gradient descent. The images keep their geometry (:func:`~.io.to_sitk`), so parameters compare
+directly with ours.
 """
 
 from __future__ import annotations
@@ -57,10 +56,8 @@ class SimpleITKParams(Params):
 
 
 def _registration_method(params: "SimpleITKParams", F, M, transform):
-    """SimpleITK's ``ImageRegistrationMethod`` set up by ``params`` (metric, random sampling, linear
-    interpolation, optimiser, physical-shift scales, pyramid with smoothing in physical units, the rigid
-    ``transform`` centred by ``CenteredTransformInitializer``), 2D and 3D alike; with the initial transform
-    and a one-element list counting the iterations."""
+    """SimpleITK's ``ImageRegistrationMethod`` set up by ``params`` as the module docstring says for the rigid
+    ``transform``, with the initial transform and a one-element list counting the iterations."""
     import SimpleITK as sitk
 
     reg = sitk.ImageRegistrationMethod()

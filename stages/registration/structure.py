@@ -99,10 +99,9 @@ def distinct_levels(image: Image, limit: int, samples: int = 65536) -> int:
 def interior_structure(image: Image) -> float:
     """Mean gradient magnitude inside the object over its mean on the object's outline (unit-free, >= 0).
 
-    The image is block-averaged by 2 along axes of at least 48 pixels; the object is that copy's
-    (:func:`object_mask`), the gradient the copy's smoothed by one pixel; the outline band is :data:`BAND` pixels
-    either side of the object's edge, the interior the object eroded by :data:`ERODE`. NaN when either is empty
-    (an object smaller than the band, or filling the grid)."""
+    On :func:`analysed_copy`, its object (:func:`object_mask`) and its gradient smoothed by one pixel; the outline
+    band is :data:`BAND` pixels either side of the object's edge, the interior the object eroded by :data:`ERODE`.
+    NaN when either is empty (an object smaller than the band, or filling the grid)."""
     small = analysed_copy(image)
     obj = object_mask(small)
     band, inside = grow(obj, BAND) & grow(~obj, BAND), ~grow(~obj, ERODE)
@@ -117,9 +116,9 @@ def interior_structure(image: Image) -> float:
 @once_per_image
 def interior_spread(image: Image) -> float:
     """Spread of the intensities inside the object over the object's contrast with its background (unit-free,
-    >= 0): ``(q90 - q10) / |median(core) - median(background core)|`` on the image block-averaged by 2 (axes of
-    at least 48 pixels), the core being the Otsu content (:func:`~.image.foreground_mask`, holes not filled)
-    eroded by one pixel and the background core the rest eroded by one pixel (no edge pixel in either).
+    >= 0): ``(q90 - q10) / |median(core) - median(background core)|`` on :func:`analysed_copy`, the core being the
+    Otsu content (:func:`~.image.foreground_mask`, holes not filled) and the background core the rest, each eroded
+    by one pixel (no edge pixel in either).
 
     A mask or silhouette at one value plus Gaussian noise of deviation s scores 2.56 s' / contrast (s' the
     block average's deviation), a binary image 0 whatever its shape: what it says is whether the object's
