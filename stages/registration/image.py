@@ -179,11 +179,11 @@ def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
     return float(edges[1:-1][np.argmax(between)])
 
 
-def border_fraction(mask: np.ndarray) -> float:
-    """The fraction of the array's outermost pixels (every face of the grid) that ``mask`` holds."""
-    inner = np.zeros(mask.shape, dtype=bool)
-    inner[tuple(slice(1, -1) if n > 2 else slice(0, 0) for n in mask.shape)] = True
-    return float(mask[~inner].mean())
+def border(shape) -> np.ndarray:
+    """The outermost pixels of a grid of ``shape`` (every face), a bool array of that shape."""
+    out = np.ones(shape, dtype=bool)
+    out[tuple(slice(1, -1) if n > 2 else slice(0, 0) for n in shape)] = False
+    return out
 
 
 def foreground_mask(image: Image) -> np.ndarray:
@@ -194,7 +194,7 @@ def foreground_mask(image: Image) -> np.ndarray:
     background: an inverted image, a negative); the whole grid in between (the object fills the frame: no
     background to tell it from)."""
     above = image.data > otsu_threshold(image.data)
-    share = border_fraction(above)
+    share = float(above[border(above.shape)].mean())
     if share <= 0.5:
         return above
     return ~above if share >= 0.9 else np.ones_like(above)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from topomatch.stages.registration.image import Image, foreground_mask, gaussian_blur, grow, otsu_threshold
+from topomatch.stages.registration.image import Image, border, foreground_mask, gaussian_blur, grow, otsu_threshold
 from topomatch.stages.registration.interpolation import resample
 from topomatch.stages.registration.transform import RigidTransform
 
@@ -32,12 +32,7 @@ def fill_holes(mask: np.ndarray) -> np.ndarray:
     background, as ``scipy.ndimage.binary_fill_holes`` with a full structuring element)."""
     mask = np.asarray(mask, dtype=bool)
     free = ~mask
-    outside = np.zeros_like(mask)
-    for axis in range(mask.ndim):
-        for end in (0, -1):
-            index = [slice(None)] * mask.ndim
-            index[axis] = end
-            outside[tuple(index)] = free[tuple(index)]
+    outside = free & border(mask.shape)
     while True:  # geodesic dilation of the border's background inside the background
         grown = grow(outside, 1.0) & free
         if np.array_equal(grown, outside):
