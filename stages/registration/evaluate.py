@@ -97,8 +97,7 @@ def evaluate_registration(fixed: Image, registration: Registration, truth: dict[
     mean = float(tre.mean())
     return EvaluateResult(registration.method, dict(zip(est.names, map(float, d))),
                           math.degrees(math.acos(max(-1.0, min(1.0, cos)))), float(np.linalg.norm(d[k:])), mean,
-                          float(tre.max()), bool(mean <= params.threshold) if math.isfinite(mean) else False,
-                          not registration.ok, registration.seconds,
+                          float(tre.max()), bool(mean <= params.threshold), not registration.ok, registration.seconds,
                           true_t.degrees())
 
 

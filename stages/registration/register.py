@@ -701,9 +701,8 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     fine = run.levels[-1].objective
     value = fine(theta)
     flags = self_check(run, theta, value, stop)
-    restarts = 0
-    if run.better is not None and params.check.retry:
-        restarts = 1
+    restarts = int(run.better is not None and params.check.retry)  # the capture check's better end adopted
+    if restarts:
         theta, stop, run.ends = run.better
         value = fine(theta)
         flags = self_check(run, theta, value, stop)
