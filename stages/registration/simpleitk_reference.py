@@ -30,8 +30,7 @@ class SimpleITKParams(Params):
 
     bins: int = Field(50, ge=4, description="Mattes histogram bins")
     sampling: float = Field(0.25, gt=0, le=1, description="fraction of fixed pixels sampled at random per iteration")
-    sampling_seed: int = Field(42, ge=0, description="seed of the metric's random sampling (results still differ "
-                                                     "between runs here, even on one thread)")
+    sampling_seed: int = Field(42, ge=0, description="seed of the metric's random sampling (runs still differ)")
     init: Literal["geometry", "moments"] = Field("moments", description="CenteredTransformInitializer mode")
     shrink: list[int] = Field(default_factory=lambda: [4, 2, 1], min_length=1, description="pyramid shrink factors")
     smoothing: list[float] = Field(default_factory=lambda: [2.0, 1.0, 0.0], min_length=1,
