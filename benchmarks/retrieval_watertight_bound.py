@@ -2,7 +2,7 @@
 
 Usage::
 
-    .venv/bin/python benchmarks/retrieval_watertight_bound.py WT.db [--depth-buffer] [--k-reciprocal]
+    .venv/bin/python benchmarks/retrieval_watertight_bound.py WT.db [--depth-buffer] [--k-reciprocal] [--parts gps,lfd]
 
 Every setting of the selection protocol's grid (:func:`retrieval_selection.grid_settings`) is
 evaluated on all 400 Watertight meshes of an index built with the default method, and the best NN, the
@@ -22,6 +22,10 @@ out of reach; neither is part of the product:
 * ``--k-reciprocal`` re-ranks the unre-ranked fused matrix by k-reciprocal encoding (Jaccard distance of
   the expanded k-reciprocal neighbour sets mixed with the original; Zhong et al., CVPR 2017) instead of
   manifold ranking, over k1 in (10, 20, 30), k2 in (1, 6), lambda in (0.1, 0.3).
+
+``--parts gps,lfd`` (issue 29, 2026-12-05, third session) adds issue 29's new parts, the global point signature
+distance histograms and the light field descriptor, as further parts of the fusion (the index must hold their rows:
+``topomatch index ... --method gps``, ``--method lfd``), to ask the same question of seven parts.
 """
 
 from __future__ import annotations
@@ -122,10 +126,15 @@ def main() -> None:
     ap.add_argument("watertight", help="index of SHREC'07 Watertight (default method, labelled)")
     ap.add_argument("--depth-buffer", action="store_true", help="add the depth-buffer descriptor as a sixth part")
     ap.add_argument("--k-reciprocal", action="store_true", help="also re-rank by k-reciprocal encoding")
+    ap.add_argument("--parts", default="", help="vector methods added as parts (comma-separated: gps, lfd)")
     args = ap.parse_args()
-    mats, labels = load(args.watertight)
+    extra = tuple(p for p in args.parts.split(",") if p)
+    mats, labels = load(args.watertight, extra)
     base = get_method(DEFAULT_METHOD).fusion
+    base = replace(base, parts=base.parts + extra)
     parts = [mats[p] for p in base.parts]
+    for p in extra:
+        print(f"{p} alone (NN, mAP):", nn_map(mats[p], labels))
     if args.depth_buffer:
         rows, _ = open_index(args.watertight).parts(DEFAULT_METHOD)
         X = np.stack([depth_buffer_descriptor(m.V, m.F) for m in (read_mesh(r.path) for r in rows if r.label)])
