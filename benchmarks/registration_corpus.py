@@ -51,6 +51,10 @@ Moving-image kinds (:data:`KIND_MAKERS`; the fixed image is the source's T1 with
   the object), plus noise.
 - ``inverted`` (from ``report`` on): the T1's negative (its maximum minus it): a bright background.
 - ``gamma`` (from ``report`` on): the T1 to a power drawn in [0.3, 3] (monotonic, non-linear), plus noise.
+- ``silhouette_resampled``, ``labels_resampled`` (``blur`` only): the silhouette or label map made on the source's
+  grid and then moved by N-linear interpolation, as a user moves a mask with a generic resampler: blurred edges,
+  fractional labels (silhouettes then get noise; label maps none). The other kinds are made from moved tissue
+  maps, with sharp edges.
 
 A third of the ``labels`` and ``silhouette`` cases of each source (the 2nd, 5th, 8th ... of the kind) are
 *swapped*: the fixed image is the label map or silhouette of the source, the moving one the moved T1 (with
@@ -115,6 +119,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final5``: drawn after the sixth round, the same design as ``final4``, fresh seeds, run once: the numbers this
   project reported until the seventh round (``check.min_outline_view``, its threshold read on ``tune``, ``edge`` and
   ``tight``): seen.
+- ``blur`` (tune side, declared after ``final7``): the two resampled kinds, MNI sections (every frame, tight
+  included), ITK slices, MNI, KmeansTest and ``anatomical.nii`` volumes (seeds 20xx): the class the ninth round's
+  attack left silently wrong (silhouettes moved by interpolation), where choosing is allowed; never reported.
 - ``capture`` (tune side, declared after ``final6``): ITK slices (2D) and nibabel's ``anatomical.nii`` (3D) as label
   maps, silhouettes, thresholded and saturated images, swapped, cropped, thick (seeds 19xx): the sources and kinds of
   ``final6``'s gross wrong basins, to look for that class where choosing is allowed; never reported.
@@ -204,6 +211,8 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
+    "blur": {3: [("mni", 10), ("kmeans", 10), ("anatomical", 10)],
+             2: [("mni-axial", 30), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 20)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
@@ -221,7 +230,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         "capture": ("labels", "silhouette", "threshold", "saturated")}
+         "capture": ("labels", "silhouette", "threshold", "saturated"),
+         "blur": ("silhouette_resampled", "labels_resampled")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
@@ -261,9 +271,12 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final7", "mni-sagittal", 2): 12502, ("final7", "itk", 2): 12602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
-         ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902}
+         ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
+         ("blur", "mni", 3): 2003, ("blur", "kmeans", 3): 2013, ("blur", "anatomical", 3): 2023,
+         ("blur", "mni-axial", 2): 2002, ("blur", "mni-coronal", 2): 2012, ("blur", "mni-sagittal", 2): 2022,
+         ("blur", "itk", 2): 2032}
 
-SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
+SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
                "final5": 10, "final6": 11, "final7": 12}
 EDGE_SPLITS = ("edge",)
@@ -505,7 +518,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
     tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7", "edge",
-                     "tight")
+                     "tight", "blur")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     if split == "tight":  # every section tightly cropped (the same draws otherwise)
@@ -661,6 +674,8 @@ def kind_gamma(f: Fields, spec: CaseSpec, deg: Degrade) -> np.ndarray:
 KIND_MAKERS: dict[str, Callable[[Fields, CaseSpec, Degrade], np.ndarray]] = {
     "t1": kind_t1, "t2": kind_t2, "pd": kind_pd, "labels": kind_labels, "silhouette": kind_silhouette,
     "threshold": kind_threshold, "saturated": kind_saturated, "inverted": kind_inverted, "gamma": kind_gamma}
+RESAMPLED = {"silhouette_resampled": "silhouette", "labels_resampled": "labels"}
+"""Kinds made on the source's grid (noise-free) and then moved by N-linear interpolation: name -> the kind made."""
 
 CUBIC_MAPS = ("t1", "pd")
 
@@ -726,12 +741,17 @@ def build_case(spec: CaseSpec) -> Case:
     fixed_kind, moving_kind = ((spec.kind, "t1") if spec.swapped else ("t1", spec.kind))
     fixed_data = KIND_MAKERS[fixed_kind](src, spec, Degrade(src.grid, spec.noise_fixed, rng))
     fixed = src.grid.with_data(fixed_data, name=f"{spec.id}_fixed", source=src.grid.source)
-    mov = moved_fields(src, truth, maps_needed(moving_kind, src))
+    if moving_kind in RESAMPLED:  # made on the source's grid, then moved (linear: "made" is not a cubic map)
+        made = KIND_MAKERS[RESAMPLED[moving_kind]](src, spec, Degrade(src.grid, 0.0, rng))
+        mov = moved_fields(src.on(src.grid, {**src.maps, "made": made}), truth, {"made", "t1"})
+    else:
+        mov = moved_fields(src, truth, maps_needed(moving_kind, src))
     if spec.thick:
         mov = thick_slices(mov)
-    noise = 0.0 if moving_kind == "labels" else spec.noise_moving
-    moving = mov.grid.with_data(KIND_MAKERS[moving_kind](mov, spec, Degrade(mov.grid, noise, rng, spec.bias)),
-                                name=f"{spec.id}_moving", source=src.grid.source)
+    noise = 0.0 if moving_kind in ("labels", "labels_resampled") else spec.noise_moving
+    degrade = Degrade(mov.grid, noise, rng, spec.bias)
+    data = degrade.noise(mov.maps["made"]) if moving_kind in RESAMPLED else KIND_MAKERS[moving_kind](mov, spec, degrade)
+    moving = mov.grid.with_data(data, name=f"{spec.id}_moving", source=src.grid.source)
     if spec.crop:
         moving = crop_slab(moving, spec.crop["axis"], spec.crop["fraction"], spec.crop["start"])
     return Case(spec, fixed, moving, truth)
