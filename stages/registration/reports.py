@@ -285,8 +285,10 @@ def checkerboard(a: np.ndarray, b: np.ndarray, tiles: int = 8) -> np.ndarray:
 
 
 def _unit(x: np.ndarray) -> np.ndarray:
-    lo, hi = float(np.min(x)), float(np.max(x))
-    return (x - lo) / (hi - lo) if hi > lo else np.zeros_like(x)
+    """``x`` windowed to its 0.5th-99.5th percentiles onto [0, 1] (as the viewer shows it): a few bright outliers
+    (scalp fat, a vessel) do not darken the rest."""
+    lo, hi = (float(np.percentile(x, q)) for q in (0.5, 99.5))
+    return np.clip((x - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.zeros_like(x, dtype=np.float64)
 
 
 def overlay_rgb(fixed: np.ndarray, moving: np.ndarray) -> np.ndarray:

@@ -84,3 +84,19 @@ def test_volume_report_resamples_in_physical_space():
     inner = (slice(2, -2), slice(2, -2), slice(6, -6))
     assert np.abs(after[inner].astype(int) - fixed_bytes[inner]).mean() < 3 < np.abs(
         before[inner].astype(int) - fixed_bytes[inner]).mean()
+
+
+def test_overlay_windows_each_image_like_the_viewer():
+    """The overlay figure's colours (``reports.overlay_rgb``): grey (R = G = B) where the two images agree, and each
+    image windowed to its 0.5th-99.5th percentiles, so that one bright outlier pixel (scalp fat) leaves a ramp's
+    middle at mid-grey instead of near black (min-max scaling put it at 0.0005)."""
+    from topomatch.stages.registration.reports import overlay_rgb
+
+    ramp = np.linspace(0.0, 1.0, 10_000).reshape(100, 100)
+    rgb = overlay_rgb(ramp, ramp)
+    assert np.array_equal(rgb[..., 0], rgb[..., 1]) and np.array_equal(rgb[..., 1], rgb[..., 2])
+    bright = ramp.copy()
+    bright[0, 0] = 1000.0
+    middle = overlay_rgb(bright, ramp)[50, 0]
+    assert middle[0] == pytest.approx(0.5, abs=0.01) and middle[1] == pytest.approx(0.5, abs=0.01)
+    assert overlay_rgb(bright, ramp).min() == 0.0 and overlay_rgb(bright, ramp).max() == 1.0
