@@ -276,7 +276,8 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("blur", "mni-axial", 2): 2002, ("blur", "mni-coronal", 2): 2012, ("blur", "mni-sagittal", 2): 2022,
          ("blur", "itk", 2): 2032}
 
-SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, "dev": 2, "report": 3, "confirm": 4, "holdout": 5, "final": 6, "final2": 7,
+SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, "dev": 2, "report": 3, "confirm": 4,
+               "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
                "final5": 10, "final6": 11, "final7": 12}
 EDGE_SPLITS = ("edge",)

@@ -644,9 +644,10 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
         where = "outside the search bounds (max_translation / max_angle)"
     if not confirmed:
         return []
-    return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result ({best_value:.4g} > "
-                            f"{here:.4g} at the {levels[0].spacing:g}-unit level) {where}: the registration stopped in "
-                            f"a local optimum; the misalignment is probably outside the capture range")]
+    return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result "
+                            f"({best_value:.4g} > {here:.4g} at the {levels[0].spacing:g}-unit level) {where}: the "
+                            f"registration stopped in a local optimum; the misalignment is probably outside the capture "
+                            f"range")]
 
 
 CHECKS: tuple[Callable[..., list[Flag]], ...] = (

@@ -276,25 +276,31 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
 
 
 def checkerboard(a: np.ndarray, b: np.ndarray, tiles: int = 8) -> np.ndarray:
-    """Alternate square tiles of two images of the same shape (each scaled to [0, 1])."""
+    """Alternate square tiles of two images of the same shape (each in its :func:`display_window`)."""
     H, W = a.shape
     s = max(1, min(H, W) // tiles)
     rows, cols = np.mgrid[0:H, 0:W]
     mask = ((rows // s) + (cols // s)) % 2 == 0
-    return np.where(mask, _unit(a), _unit(b))
+    return np.where(mask, windowed(a, *display_window(a)), windowed(b, *display_window(b)))
 
 
-def _unit(x: np.ndarray) -> np.ndarray:
-    """``x`` windowed to its 0.5th-99.5th percentiles onto [0, 1] (as the viewer shows it): a few bright outliers
-    (scalp fat, a vessel) do not darken the rest."""
-    lo, hi = (float(np.percentile(x, q)) for q in (0.5, 99.5))
-    return np.clip((x - lo) / (hi - lo), 0.0, 1.0) if hi > lo else np.zeros_like(x, dtype=np.float64)
+def display_window(values: np.ndarray) -> tuple[float, float]:
+    """The intensities drawn black and white in every registration figure and the viewer: the 0.5th and 99.5th
+    percentiles of ``values`` (a few bright outliers, scalp fat or a vessel, do not darken the rest)."""
+    lo, hi = np.percentile(values, (0.5, 99.5))
+    return float(lo), float(hi)
+
+
+def windowed(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """``x`` mapped from [lo, hi] onto [0, 1], clipped (an empty window: ``x - lo`` clipped, so that the rare
+    pixels of a nearly constant image, a sparse mask, still show)."""
+    return np.clip((x - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
 
 
 def overlay_rgb(fixed: np.ndarray, moving: np.ndarray) -> np.ndarray:
     """Fixed in magenta, moving in green: grey where they agree."""
-    f, m = _unit(fixed), _unit(moving)
-    return np.clip(np.stack([f, m, f], axis=-1), 0, 1)
+    f, m = (windowed(x, *display_window(x)) for x in (fixed, moving))
+    return np.stack([f, m, f], axis=-1)
 
 
 def planes(image) -> list[tuple[str, np.ndarray, float]]:

@@ -21,7 +21,7 @@ from pydantic import Field
 
 from topomatch.pipeline.contract import Params, ReportOutput, report
 from topomatch.stages.registration.register import describe
-from topomatch.stages.registration.reports import before_after, registered_items
+from topomatch.stages.registration.reports import before_after, display_window, registered_items, windowed
 
 #: Largest number of samples per axis, and in all, kept in a page (a volume of 128 x 128 x 62 voxels
 #: becomes about 300,000 samples: three images of that size travel as about 1.2 MB of base64).
@@ -58,7 +58,7 @@ draw();})();</script>
 
 def _bytes(a: np.ndarray, lo: float, hi: float) -> str:
     """base64 of ``a`` mapped from [lo, hi] to 0..255 (uint8, C order)."""
-    u = np.clip((np.asarray(a, dtype=np.float64) - lo) / (hi - lo if hi > lo else 1.0), 0, 1)
+    u = windowed(np.asarray(a, dtype=np.float64), lo, hi)
     return base64.b64encode(np.round(255 * u).astype(np.uint8).tobytes()).decode()
 
 
@@ -77,8 +77,8 @@ def slice_viewer(fixed: np.ndarray, before: np.ndarray, after: np.ndarray, spaci
     keep = tuple(slice(None, None, k) for k in step)
     fixed, before, after = (np.ascontiguousarray(np.asarray(a)[keep]) for a in (fixed, before, after))
     spacing = [float(s) * k for s, k in zip(spacing, step)]
-    lo, hi = (float(np.percentile(fixed, q)) for q in (0.5, 99.5))
-    mlo, mhi = (float(np.percentile(np.concatenate([before.ravel(), after.ravel()]), q)) for q in (0.5, 99.5))
+    lo, hi = display_window(fixed)
+    mlo, mhi = display_window(np.concatenate([before.ravel(), after.ravel()]))
     payload = {"shape": list(fixed.shape), "spacing": spacing, "fixed": _bytes(fixed, lo, hi),
                "before": _bytes(before, mlo, mhi), "after": _bytes(after, mlo, mhi)}
     views = [(fixed.shape[1], fixed.shape[0], spacing[1], spacing[0], "")] if fixed.ndim == 2 else [
