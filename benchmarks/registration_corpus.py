@@ -129,7 +129,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   this project reported until the ninth round: seen.
 - ``final7``: drawn after the ninth round (``two_class_residual`` over the classes' contrast, its threshold read on
   the tune side, adopted on ``capture``), the same design as ``final6``, fresh seeds 12xxx, run once: the numbers
-  this project reports now.
+  this project reported until the tenth round.
+- ``final8``: declared before the tenth round's tune-side run (``check.shortlist``: the capture test's probes
+  ranked again at the first level), the design of ``final7`` with the two resampled kinds of ``blur`` added to its
+  kinds (eleven), fresh seeds 13xxx, run once: the numbers this project reports now.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -208,6 +211,8 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final7": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final8": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+               2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -228,6 +233,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
+         "final8": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
+                    "silhouette_resampled", "labels_resampled"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -269,6 +276,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final7", "mni", 3): 12103, ("final7", "mni15", 3): 12703, ("final7", "kmeans", 3): 12203,
          ("final7", "anatomical", 3): 12303, ("final7", "mni-axial", 2): 12102, ("final7", "mni-coronal", 2): 12402,
          ("final7", "mni-sagittal", 2): 12502, ("final7", "itk", 2): 12602,
+         ("final8", "mni", 3): 13103, ("final8", "mni15", 3): 13703, ("final8", "kmeans", 3): 13203,
+         ("final8", "anatomical", 3): 13303, ("final8", "mni-axial", 2): 13102, ("final8", "mni-coronal", 2): 13402,
+         ("final8", "mni-sagittal", 2): 13502, ("final8", "itk", 2): 13602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -279,7 +289,8 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
 SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, "dev": 2, "report": 3, "confirm": 4,
                "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
-               "final5": 10, "final6": 11, "final7": 12}
+               "final5": 10, "final6": 11, "final7": 12,
+               "final8": 13}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -518,8 +529,8 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
-    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7", "edge",
-                     "tight", "blur")
+    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
+                      "final8", "edge", "tight", "blur")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     if split == "tight":  # every section tightly cropped (the same draws otherwise)

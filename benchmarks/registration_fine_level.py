@@ -34,7 +34,7 @@ from topomatch.stages.registration.transform import RigidTransform  # noqa: E402
 VARIANTS = {
     "default": {}, "all": {"samples": None}, "s40k": {"samples": 40000}, "b48": {"bins": 48},
     "all_b48": {"samples": None, "bins": 48}, "pv": {"interpolation": "pv"}, "it60": {"iterations": 60},
-    "avg4": {"average": 4},
+    "avg4": {"average": 4}, "sm05": {"smoothing": 0.5}, "sm075": {"smoothing": 0.75}, "sm1": {"smoothing": 1.0},
 }
 """Changes to the 2D finest level (:data:`DIMENSION_DEFAULTS`), one at a time."""
 

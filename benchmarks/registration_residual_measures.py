@@ -36,7 +36,8 @@ import registration_corpus as corpus  # noqa: E402
 from topomatch.stages.registration.image import Image, otsu_threshold  # noqa: E402
 from topomatch.stages.registration.structure import two_class_residual  # noqa: E402
 
-OUTLINE_ONLY = ("silhouette", "threshold")
+OUTLINE_ONLY = ("silhouette", "threshold", "silhouette_resampled")
+MEASURES = ("total", "contrast", "eroded", "robust")
 STRUCTURED = ("t1", "t2", "pd", "inverted", "gamma")
 
 
@@ -51,7 +52,10 @@ def measures(image: Image) -> dict[str, float] | None:
     inner = [ndimage.binary_erosion(c, border_value=1) for c in (upper, ~upper)]
     eroded = (max(data[c].var() for c in inner) / (data[upper].mean() - data[~upper].mean()) ** 2
               if all(c.any() for c in inner) else math.nan)
-    return {"total": float(within / data.var()), "contrast": contrast, "eroded": float(eroded)}
+    robust_scale = [1.4826 * np.median(np.abs(data[c] - np.median(data[c]))) for c in (upper, ~upper)]
+    robust = max(robust_scale) ** 2 / (np.median(data[upper]) - np.median(data[~upper])) ** 2
+    return {"total": float(within / data.var()), "contrast": contrast, "eroded": float(eroded),
+            "robust": float(robust)}
 
 
 def main() -> None:
@@ -68,10 +72,10 @@ def main() -> None:
                     values = measures(image)
                     if values is not None:
                         groups[(split, dim, kind)].append(values)
-    print(f"{'split':8s} dim {'kind':11s}   n  " + "  ".join(f"{m:>17s}" for m in ("total", "contrast", "eroded")))
+    print(f"{'split':8s} dim {'kind':11s}   n  " + "  ".join(f"{m:>17s}" for m in MEASURES))
     for (split, dim, kind), rows in sorted(groups.items()):
         ranges = "  ".join(f"{np.nanmin([r[m] for r in rows]):8.4f}-{np.nanmax([r[m] for r in rows]):8.4f}"
-                           for m in ("total", "contrast", "eroded"))
+                           for m in MEASURES)
         print(f"{split:8s} {dim}D  {kind:11s} {len(rows):3d}  {ranges}")
     pooled = [(kind, r["contrast"]) for (_, _, kind), rows in groups.items() for r in rows]
     high = max(v for k, v in pooled if k in OUTLINE_ONLY)

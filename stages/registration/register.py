@@ -380,13 +380,20 @@ class _Run:
         return self._grid
 
     def candidates(self, theta: np.ndarray) -> list[np.ndarray]:
-        """The ``check.candidates`` best grid transforms away from the result, at least a grid cell apart."""
-        grid, chosen = self.grid(), []
+        """The ``check.candidates`` best of the ``check.shortlist`` best grid transforms away from the result (at
+        least a grid cell apart), ranked again by the first level's measure: the search copy's coarse grid can
+        miss a narrow peak that the first level sees from a grid cell away."""
+        c, grid, chosen = self.params.check, self.grid(), []
         for i in np.argsort(-grid.values, kind="stable"):
-            if not math.isfinite(grid.values[i]) or len(chosen) == self.params.check.candidates:
+            if not math.isfinite(grid.values[i]) or len(chosen) == max(c.shortlist, c.candidates):
                 break
             if all(self.distance(grid.thetas[i], other) >= grid.spacing for other in [theta, *chosen]):
                 chosen.append(grid.thetas[i])
+        if len(chosen) > c.candidates:
+            first = self.levels[0].objective
+            values = [first(t) for t in chosen]
+            chosen = [chosen[i] for i in np.argsort([-v if math.isfinite(v) else math.inf for v in values],
+                                                     kind="stable")[: c.candidates]]
         return chosen
 
 
