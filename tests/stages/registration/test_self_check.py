@@ -204,3 +204,27 @@ def test_small_field_of_view_low_overlap_basins_are_avoided_or_flagged(index, mu
     reg = register(case.fixed, case.moving)
     tre = _tre(case.fixed, reg, case.truth)
     assert tre <= 1.0 or not reg.ok, (tre, reg.reason)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_capture_probes_are_the_shortlist_ranked_again_at_the_first_level(pd_slice, small_t1, d):
+    """With ``check.shortlist`` N the probes are the ``candidates`` best, by the first level's measure, of the N
+    grid transforms the grid's own ranking gives (a grid cell apart from the result and from each other); with 0,
+    the grid's first ``candidates``."""
+    from topomatch.stages.registration.params import for_dimension
+    from topomatch.stages.registration.register import _Run
+
+    image = pd_slice if d == 2 else small_t1
+    result = np.zeros(3 if d == 2 else 6)
+
+    def probes(shortlist: int, candidates: int) -> list[np.ndarray]:
+        params = for_dimension(RegisterParams(check={"shortlist": shortlist, "candidates": candidates}), d)
+        return _Run(image, image, params, None, None).candidates(result)
+
+    longer = probes(0, 8)
+    assert len(longer) == 8 and all(np.array_equal(a, b) for a, b in zip(probes(0, 3), longer[:3]))
+    params = for_dimension(RegisterParams(), d)
+    first = _Run(image, image, params, None, None).levels[0].objective
+    by_measure = sorted(longer, key=lambda t: -first(t))[:3]
+    got = probes(8, 3)
+    assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, by_measure))
