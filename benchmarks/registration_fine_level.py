@@ -5,7 +5,7 @@ Usage::
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_fine_level.py polish [--cases 30]
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_fine_level.py variants \\
-        [--names default,all,b48,it60,pv,avg4,all_b48,s40k]
+        [--names default,all,b48,it60,pv,avg4,all_b48,s40k,sm05,sm075,sm1]
 
 - ``polish``: register with the defaults (JT), then maximise the finest level's own measure from the result with
   Powell (200 evaluations); prints the measure at the result, at the truth and after the polish, and the TRE of

@@ -6,13 +6,15 @@ Usage::
         [--splits tune,edge,tight,capture]
 
 For every fixed and moving image of the splits (``registration_corpus.py``, built in memory) that the residual test
-judges (``interior_structure`` and ``interior_spread`` both NaN: an object that fills the grid), three measures over
+judges (``interior_structure`` and ``interior_spread`` both NaN: an object that fills the grid), four measures over
 its two Otsu classes:
 
 - ``total``: the within-class variance over the image's variance (the sixth round's measure, threshold 0.01);
 - ``contrast``: the larger class variance over the squared difference of the class means
   (:func:`~topomatch.stages.registration.structure.two_class_residual`, the ninth round's, threshold 0.002);
-- ``eroded``: ``contrast`` with each class eroded by one pixel first (the edge pixels left out; tried, not adopted).
+- ``eroded``: ``contrast`` with each class eroded by one pixel first (the edge pixels left out; tried, not adopted);
+- ``robust``: each class's squared robust scale (1.4826 x MAD) over the squared difference of the class medians (a
+  blurred edge's ramp pixels are a minority of each class; tried, not adopted).
 
 Prints each measure's range per split, dimension and moving kind, and the threshold rule: the geometric mean of the
 largest ``contrast`` among outline-only kinds (silhouette, threshold) and the smallest among structured kinds (t1, t2,
@@ -42,7 +44,7 @@ STRUCTURED = ("t1", "t2", "pd", "inverted", "gamma")
 
 
 def measures(image: Image) -> dict[str, float] | None:
-    """The three measures of an image the residual test judges, else None."""
+    """The four measures of an image the residual test judges, else None."""
     contrast = two_class_residual(image)
     if not math.isfinite(contrast):
         return None
