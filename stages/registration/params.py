@@ -220,10 +220,10 @@ class CheckSpec(Params):
                                          "with that measure)")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
-    shortlist: int = Field(0, ge=0, description="the best grid transforms scored again at the first level, of which "
-                                                "the best `candidates` are the probes: the coarse grid can miss a "
-                                                "narrow peak (0 or fewer than candidates: the grid's own ranking; "
-                                                "10 was tried and not adopted, docs/registration.md)")
+    shortlist: int = Field(0, ge=0, description="when the candidates find no better basin, the best of this many grid "
+                                                "transforms by the first level's measure are probed too, and one that "
+                                                "wins only flags the result (a narrow peak the coarse grid misses; 0 "
+                                                "or at most candidates: off)")
     refine: int = Field(20, ge=0, description="coarsest-level iterations from each probe before the comparison")
     retry: bool = Field(True, description="when a probe wins, adopt the result of the schedule run from it and check "
                                           "again (once)")

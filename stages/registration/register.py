@@ -379,22 +379,27 @@ class _Run:
                 steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
         return self._grid
 
-    def candidates(self, theta: np.ndarray) -> list[np.ndarray]:
-        """The ``check.candidates`` best of the ``check.shortlist`` best grid transforms away from the result (at
-        least a grid cell apart), ranked again by the first level's measure: the search copy's coarse grid can
-        miss a narrow peak that the first level sees from a grid cell away."""
-        c, grid, chosen = self.params.check, self.grid(), []
+    def candidates(self, theta: np.ndarray, n: int | None = None) -> list[np.ndarray]:
+        """The ``n`` (default ``check.candidates``) best grid transforms away from the result, at least a grid cell
+        apart."""
+        grid, chosen = self.grid(), []
+        n = self.params.check.candidates if n is None else n
         for i in np.argsort(-grid.values, kind="stable"):
-            if not math.isfinite(grid.values[i]) or len(chosen) == max(c.shortlist, c.candidates):
+            if not math.isfinite(grid.values[i]) or len(chosen) == n:
                 break
             if all(self.distance(grid.thetas[i], other) >= grid.spacing for other in [theta, *chosen]):
                 chosen.append(grid.thetas[i])
-        if len(chosen) > c.candidates:
-            first = self.levels[0].objective
-            values = [first(t) for t in chosen]
-            chosen = [chosen[i] for i in np.argsort([-v if math.isfinite(v) else math.inf for v in values],
-                                                     kind="stable")[: c.candidates]]
         return chosen
+
+    def shortlisted(self, theta: np.ndarray) -> list[np.ndarray]:
+        """The ``check.candidates`` best, by the first level's measure, of the ``check.shortlist`` best grid
+        transforms away from the result: the search copy's coarse grid can miss a narrow peak that the first level
+        sees from a grid cell away."""
+        c, first = self.params.check, self.levels[0].objective
+        chosen = self.candidates(theta, c.shortlist)
+        values = [first(t) for t in chosen]
+        order = np.argsort([-v if math.isfinite(v) else math.inf for v in values], kind="stable")
+        return [chosen[i] for i in order[: c.candidates]]
 
 
 # --------------------------------------------------------------------------- self-check
@@ -621,14 +626,29 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
 def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     """Another basin is better: the ``check.candidates`` best grid transforms away from the result are refined at
     the first level; one that beats the result there by ``check.margin`` runs through the whole schedule, and if it
-    ends higher at full resolution the result is flagged (and ``run.better`` holds that end)."""
-    c, levels = run.params.check, run.levels
+    ends higher at full resolution the result is flagged (and ``run.better`` holds that end). With
+    ``check.shortlist``, when those probes find nothing, the probes the first level ranks best among the grid's
+    ``check.shortlist`` best (:meth:`_Run.shortlisted`) are asked the same; one that wins only flags (a second
+    basin the grid ranked low: adopting it added silent errors where the measure cannot be trusted)."""
+    c = run.params.check
     if not c.search:
         return []
+    probes = run.candidates(theta)
+    flags = _better_basin(run, theta, value, probes, adopt=True)
+    if flags or c.shortlist <= c.candidates:
+        return flags
+    more = [p for p in run.shortlisted(theta) if not any(np.array_equal(p, q) for q in probes)]
+    return _better_basin(run, theta, value, more, adopt=False)
+
+
+def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
+    """The capture flag if the best of ``probes``, refined at the first level, beats the result there by
+    ``check.margin`` and ends higher at full resolution; with ``adopt``, ``run.better`` holds that end."""
+    c, levels = run.params.check, run.levels
     coarse, fine = levels[0].objective, levels[-1].objective
     here = coarse(theta)
     best_value, best = -math.inf, None
-    for probe in run.candidates(theta):
+    for probe in probes:
         v = coarse(probe)
         if c.refine > 0 and math.isfinite(v):
             probe, v = run.refine(probe)
@@ -644,17 +664,19 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
         end, end_stop = run.schedule_from(best, done=c.refine)
         better_ends, run.ends = run.ends, saved
         confirmed = fine(end) > value and run.distance(end, theta) >= 2.0 * levels[0].spacing
-        run.better = (end, end_stop, better_ends) if confirmed else None
+        if adopt:
+            run.better = (end, end_stop, better_ends) if confirmed else None
         where = f"and ends at {describe(run.at(end))}, higher at full resolution"
     else:
         confirmed = fine(best) > value
         where = "outside the search bounds (max_translation / max_angle)"
     if not confirmed:
         return []
+    kind = ("the registration stopped in a local optimum; the misalignment is probably outside the capture range"
+            if adopt else "a basin the coarse grid ranked low (check.shortlist), not adopted: where the measure cannot "
+                          "be trusted (a mask read as an image) such basins are as often wrong; check the overlay")
     return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result "
-                            f"({best_value:.4g} > {here:.4g} at the {levels[0].spacing:g}-unit level) {where}: the "
-                            f"registration stopped in a local optimum; the misalignment is probably outside the capture "
-                            f"range")]
+                            f"({best_value:.4g} > {here:.4g} at the {levels[0].spacing:g}-unit level) {where}: {kind}")]
 
 
 CHECKS: tuple[Callable[..., list[Flag]], ...] = (

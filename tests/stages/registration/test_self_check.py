@@ -7,6 +7,8 @@ straight edge, volumes without overlap or shared content; and the coarse search'
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -207,24 +209,38 @@ def test_small_field_of_view_low_overlap_basins_are_avoided_or_flagged(index, mu
 
 
 @pytest.mark.parametrize("d", [2, 3])
-def test_capture_probes_are_the_shortlist_ranked_again_at_the_first_level(pd_slice, small_t1, d):
-    """With ``check.shortlist`` N the probes are the ``candidates`` best, by the first level's measure, of the N
-    grid transforms the grid's own ranking gives (a grid cell apart from the result and from each other); with 0,
-    the grid's first ``candidates``."""
+def test_shortlisted_probes_are_the_best_at_the_first_level_of_the_grids_best(pd_slice, small_t1, d):
+    """``_Run.shortlisted``: the ``candidates`` best, by the first level's measure, of the ``check.shortlist`` grid
+    transforms the grid's own ranking gives (a grid cell apart from the result and from each other)."""
     from topomatch.stages.registration.params import for_dimension
     from topomatch.stages.registration.register import _Run
 
     image = pd_slice if d == 2 else small_t1
     result = np.zeros(3 if d == 2 else 6)
-
-    def probes(shortlist: int, candidates: int) -> list[np.ndarray]:
-        params = for_dimension(RegisterParams(check={"shortlist": shortlist, "candidates": candidates}), d)
-        return _Run(image, image, params, None, None).candidates(result)
-
-    longer = probes(0, 8)
-    assert len(longer) == 8 and all(np.array_equal(a, b) for a, b in zip(probes(0, 3), longer[:3]))
-    params = for_dimension(RegisterParams(), d)
-    first = _Run(image, image, params, None, None).levels[0].objective
+    run = _Run(image, image, for_dimension(RegisterParams(check={"shortlist": 8, "candidates": 3}), d), None, None)
+    longer = run.candidates(result, 8)
+    assert len(longer) == 8 and all(np.array_equal(a, b) for a, b in zip(run.candidates(result), longer[:3]))
+    first = run.levels[0].objective
     by_measure = sorted(longer, key=lambda t: -first(t))[:3]
-    got = probes(8, 3)
+    got = run.shortlisted(result)
     assert len(got) == 3 and all(np.array_equal(a, b) for a, b in zip(got, by_measure))
+
+
+def test_a_basin_only_the_shortlist_finds_flags_and_is_not_adopted(pd_slice, monkeypatch):
+    """A 45-degree misalignment stops short of the truth and the grid's own probes find the true basin, which is
+    adopted (``restarts`` 1). With those probes taken away, the shortlisted ones find it: the result is flagged
+    (``capture``, naming the shortlist) and stays where the schedule left it (``restarts`` 0)."""
+    from topomatch.stages.registration import register as reg_module
+
+    moving = _moved(pd_slice, 3.0, -4.0, 45.0)
+    adopted = register(pd_slice, moving)
+    assert adopted.ok and adopted.restarts == 1
+    grid_own = reg_module._Run.candidates
+    monkeypatch.setattr(reg_module._Run, "candidates",
+                        lambda self, theta, n=None: [] if n is None else grid_own(self, theta, n))
+    stopped = register(pd_slice, moving, RegisterParams(check={"shortlist": 10, "retry": False, "search": True}))
+    flagged = register(pd_slice, moving, RegisterParams(check={"shortlist": 10}))
+    assert not flagged.ok and "capture" in [f.check for f in flagged.flags] and "check.shortlist" in flagged.reason
+    assert flagged.restarts == 0 and np.allclose(flagged.transform.parameters, stopped.transform.parameters)
+    truth = RigidTransform.euler2d(3.0, -4.0, 45.0, pd_slice.center)
+    assert _tre(pd_slice, flagged, truth) > 1.0 > _tre(pd_slice, adopted, truth)
