@@ -4,7 +4,7 @@ defaults: does the class of error each one found still pass unflagged?
 Usage::
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_seen_silent.py \\
-        [--splits final,final2,...] [--json benchmarks/results/registration_seen_silent.json]
+        [--splits final,final2,...] [--params JSON] [--json benchmarks/results/registration_seen_silent.json]
 
 For each split's recorded JSON (``benchmarks/results/registration_corpus_<split>.json``), the cases where ``ours-jt``
 or ``ours-mi`` passed its self-check with a wrong result (:func:`registration_corpus.correct` false) are rebuilt from
@@ -42,8 +42,10 @@ def silent_cases(split: str) -> dict[str, dict]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--splits", default=",".join(SEEN))
+    ap.add_argument("--params", default="", help="JSON overrides of the register parameters (a candidate setting)")
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
+    corpus.PARAMS.update(json.loads(args.params) if args.params else {})
     folder = Path(tempfile.mkdtemp(prefix="topomatch-seen-silent-"))
     out, still = [], {"ours-jt": 0, "ours-mi": 0}
     for split in args.splits.split(","):
@@ -70,7 +72,8 @@ def main() -> None:
     print(f"still silently wrong: JT {still['ours-jt']}, MI {still['ours-mi']} (of {len(out) // 2} cases)")
     if args.json:
         args.json.write_text(json.dumps({"about": __doc__.split("\n\n")[0], "versions": corpus._versions(),
-                                         "rows": out, "still_silent": still}, indent=1))
+                                         "params": corpus.PARAMS, "rows": out,
+                                         "still_silent": still}, indent=1))
 
 
 if __name__ == "__main__":
