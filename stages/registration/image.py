@@ -1,16 +1,14 @@
 """The image of the registration stages, in 2D and 3D alike: an array plus ITK's physical geometry.
 
-Geometry exactly as ITK / SimpleITK define it, for every dimension ``d`` (2 or 3): the pixel of
-index ``(i, j[, k])`` (``data[j, i]``, ``data[k, j, i]``: SimpleITK's array order) sits at the
-physical point::
+Geometry exactly as ITK / SimpleITK define it, for every dimension ``d`` (2 or 3): the pixel of index ``(i, j[, k])``
+(``data[j, i]``, ``data[k, j, i]``: SimpleITK's array order) sits at the physical point::
 
     p = origin + direction @ diag(spacing) @ (i, j[, k])
 
-``spacing``, ``origin`` and ``direction`` are in ITK's index order (x first), ``direction``'s
-*columns* are the grid axes. A PNG has spacing 1, origin 0 and the identity direction, so its
-physical point of pixel ``[r, c]`` is ``(c, r)``: pixel units. Everything the registration computes
-(the rotation centre, transforms, errors) is in these physical coordinates; this module is the only
-place that converts between indices and points.
+``spacing``, ``origin`` and ``direction`` are in ITK's index order (x first), ``direction``'s *columns* are the grid
+axes. A PNG has spacing 1, origin 0 and the identity direction, so its physical point of pixel ``[r, c]`` is
+``(c, r)``: pixel units. Everything the registration computes (the rotation centre, transforms, errors) is in these
+physical coordinates; this module is the only place that converts between indices and points.
 """
 
 from __future__ import annotations

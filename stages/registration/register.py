@@ -1,12 +1,11 @@
 """Coarse-to-fine rigid registration of 2D images and 3D volumes: any measure (JT, JR, MI, TMI), SPSA or Powell.
 
 :func:`register` finds the parameters of ``T(p) = R (p - c) + c + t`` (:mod:`~topomatch.stages.registration.transform`)
-maximising a measure of chapter 2 of the joint histogram of ``fixed(p)`` and ``moving(T(p))``: a start (the
-intensity centroids; in 3D a search of translations), a pyramid of levels in physical units (each a
-:class:`~topomatch.stages.registration.objective.Objective` on its own :class:`JointHistogram`), SPSA or Powell
-per level with angles scaled by the RMS radius, and a self-check (:data:`CHECKS`, each test returning typed
-:class:`Flag` s). One run loop for both dimensions: the dimension enters through the transform's
-parametrisation and :func:`~topomatch.stages.registration.params.for_dimension`. See docs/registration.md.
+maximising a measure of chapter 2 of the joint histogram of ``fixed(p)`` and ``moving(T(p))``: a start (the intensity
+centroids; in 3D a search of translations), a pyramid of levels in physical units (each a :class:`~.objective.Objective`
+on its own :class:`JointHistogram`), SPSA or Powell per level with angles scaled by the RMS radius, and a self-check
+(:data:`CHECKS`, each test returning typed :class:`Flag` s). One run loop for both dimensions: the dimension enters
+through the transform's parametrisation and :func:`~.params.for_dimension`. See docs/registration.md.
 """
 
 from __future__ import annotations
@@ -50,18 +49,15 @@ class Flag:
 
 @dataclass(frozen=True, eq=False)
 class Registration:
-    """The outcome of one registration (any method, either dimension).
-
-    ``transform``: T with ``fixed(p) ~ moving(T(p))``, about the fixed grid's centre; ``value``: the measure there
-    (finest level; NaN for methods without one); ``method``: e.g. ``spsa/jt(alpha=2 histogram)``; ``seconds``: wall
-    time (images already in memory); ``iterations``, ``evaluations``: over all levels; ``stop_reason``: the finest
-    level's; ``history``: per iteration over all levels, ``level`` (k,), ``theta`` (k, p), ``value``, ``step``,
-    ``blocked``; ``initial``: where the schedule started; ``overlap``: fraction of the finest level's fixed samples
-    inside the moving image at the result; ``restarts``: runs of the schedule adopted after the first (a capture
-    retry); ``measures``: what each self-check test measured, flagged or not (``chance``: the measure over its
-    chance level; ``consistency``: the largest relative drop of a coarser level's measure; ``agreement``: the
-    distance to JT's optimum; ``content``, ``prominence``, ``flatness``): the numbers its thresholds compare.
-    """
+    """The outcome of one registration (any method, either dimension). ``transform``: T, ``fixed(p) ~ moving(T(p))``,
+    about the fixed grid's centre; ``value``: the measure there (finest level; NaN for methods without one);
+    ``method``: e.g. ``spsa/jt(alpha=2 histogram)``; ``seconds``: wall time (images in memory); ``iterations``,
+    ``evaluations``: over all levels; ``stop_reason``: the finest level's; ``history``: per iteration over all levels,
+    ``level`` (k,), ``theta`` (k, p), ``value``, ``step``, ``blocked``; ``initial``: where the schedule started;
+    ``overlap``: fraction of the finest level's fixed samples inside the moving image at the result; ``restarts``:
+    runs of the schedule adopted after the first (a capture retry); ``measures``: what each self-check test measured,
+    flagged or not (``chance``: the measure over its chance level; ``consistency``: the largest relative drop of a
+    coarser level's measure; ``agreement``: the distance to JT's optimum; ``content``, ``prominence``, ``flatness``)."""
 
     transform: RigidTransform
     value: float
@@ -380,8 +376,7 @@ class _Run:
         return self._grid
 
     def candidates(self, theta: np.ndarray, n: int | None = None) -> list[np.ndarray]:
-        """The ``n`` (default ``check.candidates``) best grid transforms away from the result, at least a grid cell
-        apart."""
+        """The ``n`` (``check.candidates``) best grid transforms away from the result, a grid cell apart."""
         grid, chosen = self.grid(), []
         n = self.params.check.candidates if n is None else n
         for i in np.argsort(-grid.values, kind="stable"):
@@ -392,9 +387,8 @@ class _Run:
         return chosen
 
     def shortlisted(self, theta: np.ndarray) -> list[np.ndarray]:
-        """The ``check.candidates`` best, by the first level's measure, of the ``check.shortlist`` best grid
-        transforms away from the result: the search copy's coarse grid can miss a narrow peak that the first level
-        sees from a grid cell away."""
+        """The ``check.candidates`` best by the first level's measure of the ``check.shortlist`` best grid transforms:
+        the search copy's coarse grid can miss a narrow peak that the first level sees from a grid cell away."""
         c, first = self.params.check, self.levels[0].objective
         chosen = self.candidates(theta, c.shortlist)
         values = [first(t) for t in chosen]
@@ -624,12 +618,9 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
-    """Another basin is better: the ``check.candidates`` best grid transforms away from the result are refined at
-    the first level; one that beats the result there by ``check.margin`` runs through the whole schedule, and if it
-    ends higher at full resolution the result is flagged (and ``run.better`` holds that end). With
-    ``check.shortlist``, when those probes find nothing, the probes the first level ranks best among the grid's
-    ``check.shortlist`` best (:meth:`_Run.shortlisted`) are asked the same; one that wins only flags (a second
-    basin the grid ranked low: adopting it added silent errors where the measure cannot be trusted)."""
+    """Another basin is better (:func:`_better_basin`), found by the grid's ``check.candidates`` best transforms
+    (adopted with ``check.retry``) or, when they find none, by :meth:`_Run.shortlisted`, which only flags: adopting
+    a basin the grid ranked low added silent errors where the measure cannot be trusted."""
     c = run.params.check
     if not c.search:
         return []
@@ -643,7 +634,7 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
     """The capture flag if the best of ``probes``, refined at the first level, beats the result there by
-    ``check.margin`` and ends higher at full resolution; with ``adopt``, ``run.better`` holds that end."""
+    ``check.margin`` and, run through the schedule, ends higher at full resolution (``adopt``: in ``run.better``)."""
     c, levels = run.params.check, run.levels
     coarse, fine = levels[0].objective, levels[-1].objective
     here = coarse(theta)
@@ -672,9 +663,9 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
         where = "outside the search bounds (max_translation / max_angle)"
     if not confirmed:
         return []
-    kind = ("the registration stopped in a local optimum; the misalignment is probably outside the capture range"
-            if adopt else "a basin the coarse grid ranked low (check.shortlist), not adopted: where the measure cannot "
-                          "be trusted (a mask read as an image) such basins are as often wrong; check the overlay")
+    kind = ("the registration stopped in a local optimum; the misalignment is probably outside the capture range" if
+            adopt else "a basin the coarse grid ranked low (check.shortlist), not adopted: such basins are as often "
+            "wrong where the measure cannot be trusted (a mask read as an image); check the overlay")
     return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result "
                             f"({best_value:.4g} > {here:.4g} at the {levels[0].spacing:g}-unit level) {where}: {kind}")]
 

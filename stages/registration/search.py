@@ -212,18 +212,17 @@ def directions(p: int) -> np.ndarray:
 
 def flatness(score: Callable[[np.ndarray], float], theta: np.ndarray, *, dim: int, reach: float,
              radius: float) -> tuple[float, np.ndarray]:
-    """How little ``score`` falls from its maximum ``theta`` in its flattest direction, relative to its
-    steepest: near 0 when the images do not determine some combination of the parameters (translation along
-    a straight edge or stripes, the rotation of a disc).
+    """How little ``score`` falls from its maximum ``theta`` in its flattest direction, relative to its steepest:
+    near 0 when the images do not determine some combination of the parameters (translation along a straight edge
+    or stripes, the rotation of a disc).
 
-    Directions are unit vectors of ``(arcs, translation)`` space, each angle as the arc at ``radius`` (the
-    RMS radius of the content): :func:`directions` (axes and diagonals), translations (every 10 degrees in 2D,
-    the 13 directions of 3-space in 3D) and the pure rotations. The drop along u is
-    ``score(theta) - mean(score(theta +- reach u))``: at ``reach`` a determined optimum has fallen in every
-    direction, an undetermined one has not in its flat direction. (A direction fitted to the local curvature
-    was tried and dropped: on coarse copies of real images it found valleys that correct results sit in.)
-    Returns the smallest drop over the largest (clipped to [0, 1]) and the flattest direction (p,).
-    """
+    Directions are unit vectors of ``(arcs, translation)`` space, each angle as the arc at ``radius`` (the RMS
+    radius of the content): :func:`directions` (axes and diagonals), translations (every 10 degrees in 2D, the 13
+    directions of 3-space in 3D) and the pure rotations. The drop along u is ``score(theta) - mean(score(theta +-
+    reach u))``: at ``reach`` a determined optimum has fallen in every direction, an undetermined one has not in its
+    flat direction. (A direction fitted to the local curvature was tried and dropped: on coarse copies of real
+    images it found valleys that correct results sit in.) Returns the smallest drop over the largest (clipped to
+    [0, 1]) and the flattest direction (p,)."""
     theta = np.asarray(theta, dtype=np.float64)
     k, p = n_angles(dim), len(theta)
     here = score(theta)

@@ -115,12 +115,12 @@ def interior_spread(image: Image) -> float:
     Otsu content (:func:`~.image.foreground_mask`, holes not filled) and the background core the rest, each eroded
     by one pixel (no edge pixel in either).
 
-    A mask or silhouette at one value plus Gaussian noise of deviation s scores 2.56 s' / contrast (s' the
-    block average's deviation), a binary image 0 whatever its shape: what it says is whether the object's
-    inside has intensities of its own, where :func:`interior_structure` asks where its edges lie (and is
-    misled by an outline with concavities or thin parts). NaN when the content fills the grid, either core
-    has fewer than 10 pixels, or less than :data:`SOLID` of the object (:func:`object_mask`) is content: a
-    binary image whose object has dark regions inside (a thresholded image) has structure inside, and 0 spread."""
+    A mask or silhouette at one value plus Gaussian noise of deviation s scores 2.56 s' / contrast (s' the block
+    average's deviation), a binary image 0 whatever its shape: what it says is whether the object's inside has
+    intensities of its own, where :func:`interior_structure` asks where its edges lie (and is misled by an outline
+    with concavities or thin parts). NaN when the content fills the grid, either core has fewer than 10 pixels, or
+    less than :data:`SOLID` of the object (:func:`object_mask`) is content: a binary image whose object has dark
+    regions inside (a thresholded image) has structure inside, and 0 spread."""
     small = analysed_copy(image)
     content = foreground_mask(small)
     core, back = ~grow(~content, 1.0), ~grow(content, 1.0)
