@@ -220,8 +220,8 @@ class CheckSpec(Params):
                                          "with that measure)")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
-    shortlist: int = Field(10, ge=0, description="when the candidates find no better basin, the best of this many grid "
-                           "transforms by the first level's measure are probed too; a winner only flags (0: off)")
+    shortlist: int = Field(10, ge=0, description="when the candidates find no better basin, the best of this many "
+                           "grid transforms by the first level's measure are probed; a winner only flags (0: off)")
     refine: int = Field(20, ge=0, description="coarsest-level iterations from each probe before the comparison")
     retry: bool = Field(True, description="when a probe wins, adopt the result of the schedule run from it and check "
                                           "again (once)")

@@ -663,9 +663,9 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
         where = "outside the search bounds (max_translation / max_angle)"
     if not confirmed:
         return []
-    kind = ("the registration stopped in a local optimum; the misalignment is probably outside the capture range" if
-            adopt else "a basin the coarse grid ranked low (check.shortlist), not adopted: such basins are as often "
-            "wrong where the measure cannot be trusted (a mask read as an image); check the overlay")
+    kind = ("the registration stopped in a local optimum; the misalignment is probably outside the capture range"
+            if adopt else "a basin the coarse grid ranked low (check.shortlist), not adopted: such basins are as "
+            "often wrong where the measure cannot be trusted (a mask read as an image); check the overlay")
     return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result "
                             f"({best_value:.4g} > {here:.4g} at the {levels[0].spacing:g}-unit level) {where}: {kind}")]
 
