@@ -238,7 +238,7 @@ def test_a_basin_only_the_shortlist_finds_flags_and_is_not_adopted(pd_slice, mon
     grid_own = reg_module._Run.candidates
     monkeypatch.setattr(reg_module._Run, "candidates",
                         lambda self, theta, n=None: [] if n is None else grid_own(self, theta, n))
-    stopped = register(pd_slice, moving, RegisterParams(check={"shortlist": 10, "retry": False, "search": True}))
+    stopped = register(pd_slice, moving, RegisterParams(check={"search": False}))  # the schedule's own end
     flagged = register(pd_slice, moving, RegisterParams(check={"shortlist": 10}))
     assert not flagged.ok and "capture" in [f.check for f in flagged.flags] and "check.shortlist" in flagged.reason
     assert flagged.restarts == 0 and np.allclose(flagged.transform.parameters, stopped.transform.parameters)
