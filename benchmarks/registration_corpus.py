@@ -135,7 +135,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   kinds (eleven), fresh seeds 13xxx, run once per setting (the candidate, not adopted, then the defaults): the
   numbers this project reported until the eleventh round.
 - ``final9``: declared before the eleventh round's tune-side run (``check.shortlist`` probes that only flag), the
-  design of ``final8``, fresh seeds 14xxx, run once: the numbers this project reports now.
+  design of ``final8``, fresh seeds 14xxx, run once: the numbers this project reported until the twelfth round.
+- ``final10``: declared before the twelfth round's tune-side run (``check.mi_agreement``: JT's result climbed by
+  mutual information at the finest level, a flag only), the design of ``final9``, fresh seeds 15xxx, run once: the
+  numbers this project reports now.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -218,6 +221,8 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final9": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final10": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -242,6 +247,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
                     "silhouette_resampled", "labels_resampled"),
          "final9": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
                     "silhouette_resampled", "labels_resampled"),
+         "final10": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
+                     "silhouette_resampled", "labels_resampled"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -289,6 +296,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final9", "mni", 3): 14103, ("final9", "mni15", 3): 14703, ("final9", "kmeans", 3): 14203,
          ("final9", "anatomical", 3): 14303, ("final9", "mni-axial", 2): 14102, ("final9", "mni-coronal", 2): 14402,
          ("final9", "mni-sagittal", 2): 14502, ("final9", "itk", 2): 14602,
+         ("final10", "mni", 3): 15103, ("final10", "mni15", 3): 15703, ("final10", "kmeans", 3): 15203,
+         ("final10", "anatomical", 3): 15303, ("final10", "mni-axial", 2): 15102, ("final10", "mni-coronal", 2): 15402,
+         ("final10", "mni-sagittal", 2): 15502, ("final10", "itk", 2): 15602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -300,7 +310,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
                "final5": 10, "final6": 11, "final7": 12,
-               "final8": 13, "final9": 14}
+               "final8": 13, "final9": 14, "final10": 15}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -540,7 +550,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
     tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
-                      "final8", "final9", "edge", "tight", "blur")
+                      "final8", "final9", "final10", "edge", "tight", "blur")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     if split == "tight":  # every section tightly cropped (the same draws otherwise)
