@@ -6,6 +6,7 @@ Usage (after indexing the collections with the default method, as docs/retrieval
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py gps-grid
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py costs
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py query-adaptive
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py intrinsic-gate
 
 ``gps-grid``: k in 5 / 10 / 20 / 40, with Rustamov's shells or not; the rule, fixed before the run: the best mean mAP
 over the tune side (Watertight half A, half B and the tune collections), ties within 0.005 to the smaller k. The
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import itertools
 import json
 import os
 import sys
@@ -136,11 +138,27 @@ def _effectiveness(D: np.ndarray, fraction: float) -> np.ndarray:
     return 1.0 / np.maximum(s.mean(axis=1), 1e-6)
 
 
+def _tune_side(args, extra: tuple[str, ...] = ()) -> dict:
+    """{name: (part matrices, labels)}: the Watertight halves, the tune collections, ``poses_tune``, and the
+    hidden-like copies of the halves and ``poses_tune`` (retrieval_selection.py's degradation)."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from retrieval_selection import DEGRADED, degraded, load, restrict
+
+    colls = {}
+    wt = load(str(args.stress / "wt.db"), extra)
+    half_a = np.isin(wt[1], np.unique(wt[1])[0::2])
+    colls["Watertight half A"], colls["Watertight half B"] = restrict(wt, half_a), restrict(wt, ~half_a)
+    colls.update({c: load(str(args.stress / f"{c}.db"), extra) for c in TUNE})
+    colls["poses_tune"] = load(str(args.poses / "poses_tune.db"), extra)
+    for name in ("Watertight half A", "Watertight half B", "poses_tune"):
+        colls[f"{name} (hidden-like)"] = degraded(colls[name], DEGRADED["hidden-like"])
+    return colls
+
+
 def query_adaptive(args) -> None:
     """The default fusion with each kept part's scale divided, per query, by its relative effectiveness to a power;
     tune side only (an exploration: nothing was built from it)."""
-    sys.path.insert(0, str(Path(__file__).parent))
-    from retrieval_selection import DEGRADED, degraded, load, nn_map, restrict
+    from retrieval_selection import nn_map
 
     from topomatch.stages.retrieval.catalogue import METHODS
     from topomatch.stages.retrieval.fusion import decide, fuse, fused_matrix, manifold_ranking
@@ -159,14 +177,7 @@ def query_adaptive(args) -> None:
         D = fuse(scaled, [1.0] * len(scaled), base.order_weights)
         return manifold_ranking(D, decision.rerank_k, base.rerank_alpha, base.rerank_normalisation)
 
-    colls = {}
-    wt = load(str(args.stress / "wt.db"))
-    half_a = np.isin(wt[1], np.unique(wt[1])[0::2])
-    colls["Watertight half A"], colls["Watertight half B"] = restrict(wt, half_a), restrict(wt, ~half_a)
-    colls.update({c: load(str(args.stress / f"{c}.db")) for c in TUNE})
-    colls["poses_tune"] = load(str(args.poses / "poses_tune.db"))
-    for name in ("Watertight half A", "Watertight half B", "poses_tune"):
-        colls[f"{name} (hidden-like)"] = degraded(colls[name], DEGRADED["hidden-like"])
+    colls = _tune_side(args)
     variants = [(f, p) for f in (0.1, 0.25) for p in (0.5, 1.0, 2.0)]
     print("collection | default | " + " | ".join(f"{f:g} / {p:g}" for f, p in variants))
     for name, (mats, labels) in colls.items():
@@ -175,15 +186,60 @@ def query_adaptive(args) -> None:
         print(name + " | " + " | ".join(f"{a:.3f} / {b:.3f}" for a, b in row), flush=True)
 
 
+def intrinsic_gate(args) -> None:
+    """The default fusion blended, pair by pair, with the fusion of the intrinsic spectral parts alone, by how well
+    those parts agree on each item's 5 nearest neighbours (their mean pairwise overlap g_i; weight 1 above ``tau``,
+    or rising linearly over ``soft`` above it; a pair's weight the min or mean of its items'), then re-ranked as the
+    default is; tune side only (an exploration, 2026-12-05: nothing was built from it)."""
+    from retrieval_selection import nn_map
+
+    from topomatch.stages.retrieval.catalogue import METHODS
+    from topomatch.stages.retrieval.fusion import (_neighbour_sets, decide, fuse, fused_matrix, kept_scales,
+                                                   manifold_ranking, median_scale)
+
+    base = METHODS["topomatch"].fusion
+
+    def blended(mats, intrinsic, tau, soft, pair):
+        decision = decide([mats[p] for p in base.parts], base)
+        kept = [p for p in base.parts if p in decision.kept]
+        every = fuse([mats[p] for p in kept], kept_scales([mats[p] for p in base.parts], base, decision),
+                     base.order_weights)
+        alone = fuse([mats[p] for p in intrinsic], [median_scale(mats[p]) for p in intrinsic])
+        sets = [_neighbour_sets(mats[p], 5) for p in intrinsic]
+        g = np.mean([[len(np.intersect1d(a, b)) / 5 for a, b in zip(sets[i], sets[j])]
+                     for i, j in itertools.combinations(range(len(sets)), 2)], axis=0)
+        w = np.clip((g - tau) / soft, 0, 1) if soft else (g >= tau).astype(float)
+        W = np.minimum.outer(w, w) if pair == "min" else np.add.outer(w, w) / 2
+        D = W * alone / median_scale(alone) + (1 - W) * every / median_scale(every)
+        return manifold_ranking(D, decision.rerank_k, base.rerank_alpha, base.rerank_normalisation)
+
+    colls = _tune_side(args, ("gps",))
+    variants = [(i, t, s, p) for i in (("hks", "shapedna"), ("hks", "shapedna", "gps")) for t in (0.4, 0.5, 0.6, 0.7, 0.8)
+                for s in (0.0, 0.2) for p in ("min", "mean")]
+    print("setting | " + " | ".join(colls))
+    print("default | " + " | ".join("%.3f / %.3f" % nn_map(fused_matrix([m[p] for p in base.parts], base), labels)
+                                    for m, labels in colls.values()), flush=True)
+    for intrinsic in {v[0] for v in variants}:
+        print(f"{'+'.join(intrinsic)} alone | " + " | ".join(
+            "%.3f / %.3f" % nn_map(manifold_ranking(fuse([m[p] for p in intrinsic], [median_scale(m[p]) for p in intrinsic]),
+                                                    decide([m[p] for p in base.parts], base).rerank_k, base.rerank_alpha,
+                                                    base.rerank_normalisation), labels) for m, labels in colls.values()))
+    for intrinsic, tau, soft, pair in variants:
+        print(f"{'+'.join(intrinsic)}, tau {tau:g}, soft {soft:g}, {pair} | " + " | ".join(
+            "%.3f / %.3f" % nn_map(blended(m, intrinsic, tau, soft, pair), labels) for m, labels in colls.values()),
+            flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["gps-grid", "costs", "query-adaptive"])
+    ap.add_argument("what", choices=["gps-grid", "costs", "query-adaptive", "intrinsic-gate"])
     ap.add_argument("--stress", type=Path, default=Path("/tmp/stress"))
     ap.add_argument("--poses", type=Path, default=Path(os.environ.get("TOPOMATCH_POSES", "/tmp/poses")))
     ap.add_argument("--json", help="gps-grid: write the results here")
     args = ap.parse_args(argv)
     warnings.filterwarnings("ignore", module="topomatch")
-    {"gps-grid": gps_grid, "costs": costs, "query-adaptive": query_adaptive}[args.what](args)
+    {"gps-grid": gps_grid, "costs": costs, "query-adaptive": query_adaptive,
+     "intrinsic-gate": intrinsic_gate}[args.what](args)
 
 
 if __name__ == "__main__":

@@ -1,11 +1,10 @@
 """Joint intensity histograms of a fixed image and a rigidly transformed moving image, 2D and 3D alike.
 
-:class:`JointHistogram` does once all that does not depend on the transform (the fixed samples: a mask, a
-fixed-seed subset, a jitter within their pixels; their physical positions about the rotation centre and their
-bins; the moving image in bin units); an evaluation is then one compiled pass (``_histogram.c``; numpy without
-it) of the rigid map, N-linear interpolation and binning (``linear``, ``parzen`` or partial volume ``pv``).
-Samples that leave the moving grid are left out and counted. See docs/registration.md, "The joint histogram".
-"""
+:class:`JointHistogram` does once all that does not depend on the transform (the fixed samples: a mask, a fixed-seed
+subset, a jitter within their pixels; their physical positions about the rotation centre and their bins; the moving
+image in bin units); an evaluation is then one compiled pass (``_histogram.c``; numpy without it) of the rigid map,
+N-linear interpolation and binning (``linear``, ``parzen`` or partial volume ``pv``). Samples that leave the moving grid
+are left out and counted. See docs/registration.md, "The joint histogram"."""
 
 from __future__ import annotations
 
@@ -75,11 +74,10 @@ class Binning:
 class JointHistogram:
     """Joint histograms of ``(fixed(p), moving(T(p)))`` for many rigid transforms ``T(p) = R (p - c) + c + t``.
 
-    The images at this resolution (any pyramid level), binned by ``fixed_binning`` and ``moving_binning`` (usually
-    over the full-resolution images' ranges); ``center``: c (d,); the fixed samples: the pixels of ``mask`` (bool,
-    this grid; default all), at most ``samples`` of them (a random subset drawn once with ``seed``), each moved
-    by a fixed random offset within its pixel with ``jitter``.
-    """
+    The images at this resolution (any pyramid level), binned by ``fixed_binning`` and ``moving_binning`` (usually over
+    the full-resolution images' ranges); ``center``: c (d,); the fixed samples: the pixels of ``mask`` (bool, this grid;
+    default all), at most ``samples`` of them (a random subset drawn once with ``seed``), each moved by a fixed random
+    offset within its pixel with ``jitter``."""
 
     def __init__(self, fixed: Image, moving: Image, fixed_binning: Binning, moving_binning: Binning, *, center,
                  mode: Mode = "parzen", samples: int | None = None, mask: np.ndarray | None = None,

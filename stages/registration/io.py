@@ -1,11 +1,10 @@
 """Reading and writing the registration's images, 2D and 3D (the files themselves:
 :mod:`topomatch.stages.imaging.files`).
 
-Every reader returns an :class:`Image` in SimpleITK's array order with ITK's geometry as SimpleITK reads it
-(LPS mm), a Pillow image with spacing 1 and origin 0. Two axes of more than one pixel make a 2D image, three a
-volume; ``slice_index`` takes a 2D slice of a volume. Every problem is an
-:class:`~topomatch.pipeline.errors.InputError` naming the file (docs/registration.md, "Bad input").
-"""
+Every reader returns an :class:`Image` in SimpleITK's array order with ITK's geometry as SimpleITK reads it (LPS mm), a
+Pillow image with spacing 1 and origin 0. Two axes of more than one pixel make a 2D image, three a volume;
+``slice_index`` takes a 2D slice of a volume. Every problem is an :class:`~topomatch.pipeline.errors.InputError` naming
+the file (docs/registration.md, "Bad input")."""
 
 from __future__ import annotations
 
@@ -48,13 +47,12 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
 
 
 def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 0, strict_slice: bool = True) -> Image:
-    """Read a 2D image or a 3D volume (or one 2D slice of a volume) with its physical geometry: a PNG, TIFF, JPEG,
-    BMP, NIfTI, MetaImage, NRRD, DICOM file or DICOM series folder (InputError naming the file: module docstring).
+    """Read a 2D image or a 3D volume (or one 2D slice of a volume) with its physical geometry: a PNG, TIFF, JPEG, BMP,
+    NIfTI, MetaImage, NRRD, DICOM file or DICOM series folder (InputError naming the file: module docstring).
 
-    ``slice_index``: for a volume, the 2D slice to take along ``axis`` of its ``(k, j, i)`` array (negative counts
-    from the end); for a 2D image an error, unless ``strict_slice`` is False (then ignored: a config's slice
-    applies to its volumes, so that one config can mix volumes and PNGs).
-    """
+    ``slice_index``: for a volume, the 2D slice to take along ``axis`` of its ``(k, j, i)`` array (negative counts from
+    the end); for a 2D image an error, unless ``strict_slice`` is False (then ignored: a config's slice applies to its
+    volumes, so that one config can mix volumes and PNGs)."""
     path = Path(path)
     arr, spacing, origin, direction = read_array(path)
     source = str(path)

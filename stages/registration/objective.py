@@ -3,9 +3,8 @@
 ``Objective(theta)`` with ``theta`` the rigid transform's parameters (:mod:`~topomatch.stages.registration.transform`,
 rotation first) returns the measure of :mod:`topomatch.stages.registration.divergence` on the joint histogram of
 ``(fixed(x), moving(T(x)))`` over the fixed samples whose ``T(x)`` lies inside the moving image. If fewer than
-``min_overlap`` of the fixed samples land inside, it returns ``-inf`` (an invalid transform, as in DIPY: the
-optimisers treat it as "do not go there") instead of a measure computed on a sliver of the images.
-"""
+``min_overlap`` of the fixed samples land inside, it returns ``-inf`` (an invalid transform, as in DIPY: the optimisers
+treat it as "do not go there") instead of a measure computed on a sliver of the images."""
 
 from __future__ import annotations
 

@@ -218,10 +218,8 @@ class CheckSpec(Params):
                                          "thesis's measure (JT, alpha 2, histogram weights) climbed from it at the "
                                          "finest level: a measure whose own optimum is biased (0: off; no effect "
                                          "with that measure)")
-    mi_agreement: float = Field(1.0, ge=0, allow_inf_nan=False,
-                                description="with the thesis's measure (JT, alpha 2, histogram weights): flag a result "
-                                            "farther than this (physical units) from mutual information's optimum "
-                                            "climbed from it at the finest level (0: off)")
+    mi_agreement: float = Field(1.0, ge=0, allow_inf_nan=False, description="with JT (alpha 2, histogram weights): "
+                                "flag a result farther than this (physical units) from MI's climb from it (0: off)")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
     shortlist: int = Field(10, ge=0, description="when the candidates find no better basin, the best of this many "

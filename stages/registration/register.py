@@ -479,11 +479,10 @@ def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
-    """A measure with a biased optimum: from the result, the finest level's schedule entry climbs a second measure
-    on the same samples and ends more than a limit away. The second is Jensen-Tsallis (alpha 2, histogram weights)
-    for every other measure (``check.agreement``: Tsallis MI on multimodal pairs), mutual information for that one
-    (``check.mi_agreement``, twelfth round: JT's optimum off on tight PD sections where MI's is not). Not asked on
-    outline-only pairs, whose measure is already of order 1."""
+    """A biased optimum: from the result, the finest level's schedule entry climbs a second measure on the same samples
+    and ends more than a limit away: JT (alpha 2, histogram weights) for every other measure (``check.agreement``:
+    Tsallis MI on multimodal pairs), mutual information for JT itself (``check.mi_agreement``, twelfth round: JT's
+    optimum off where MI's is not). Not asked on outline-only pairs, whose measure is already of order 1."""
     m, c = run.params.metric, run.params.check
     thesis = m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"
     limit = c.mi_agreement if thesis else c.agreement
@@ -492,8 +491,7 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     name, second = ("mutual information", "mi") if thesis else ("Jensen-Tsallis (alpha 2, the thesis's measure)", "jt")
     finest = run.levels[-1]
     other = Objective(finest.objective.histogram, second, alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
-    # JT's climb draws from a stream of its own, so the checks after it (and a capture adopted by them) see the
-    # eleventh round's draws: the test only flags (MI's climb keeps the run's stream, as before)
+    # JT's climb has a stream of its own: the checks after it draw as before, so the test only flags
     rng = np.random.default_rng(run.params.seed + 104729) if thesis else None
     end = run.optimize(len(run.levels) - 1, finest.spec, theta, lower=run.lower, upper=run.upper, objective=other,
                        rng=rng).theta

@@ -1,11 +1,10 @@
 """Coarse exhaustive search for the self-check, 2D and 3D: the measure on a grid of rigid transforms.
 
-On a small copy of both images (smaller side ~``SEARCH_SIDE`` pixels, ``SEARCH_BINS`` bins, nearest neighbour,
-at most ``SEARCH_SAMPLES`` samples), scored with Jensen-Tsallis of order 2 (histogram weights, the closed form)
-whatever the registration's measure: a detector of basins, not the objective. All translations of one rotation
-are one ``np.bincount`` (the moving bins on a padded canvas whose padding holds an "outside" bin). It answers the
-capture, content, prominence and flatness questions of the self-check (docs/registration.md).
-"""
+On a small copy of both images (smaller side ~``SEARCH_SIDE`` pixels, ``SEARCH_BINS`` bins, nearest neighbour, at most
+``SEARCH_SAMPLES`` samples), scored with Jensen-Tsallis of order 2 (histogram weights, the closed form) whatever the
+registration's measure: a detector of basins, not the objective. All translations of one rotation are one
+``np.bincount`` (the moving bins on a padded canvas whose padding holds an "outside" bin). It answers the capture,
+content, prominence and flatness questions of the self-check (docs/registration.md)."""
 
 from __future__ import annotations
 

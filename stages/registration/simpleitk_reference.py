@@ -2,11 +2,9 @@
 
 The textbook set-up (the SimpleITK notebooks' recipe): ``Euler2DTransform`` / ``Euler3DTransform`` centred by
 ``CenteredTransformInitializer`` (``GEOMETRY`` or ``MOMENTS``), Mattes MI on a fixed-seed random sample, linear
-interpolation, physical-shift scales, a shrink/smoothing pyramid (smoothing in physical units), and conjugate
-gradient with line search (2D default: the most accurate on the ITK cases), regular-step gradient descent (3D
-default) or gradient descent. The images keep their geometry (:func:`~.io.to_sitk`), so parameters compare
-directly with ours.
-"""
+interpolation, physical-shift scales, a shrink/smoothing pyramid (smoothing in physical units), and conjugate gradient
+with line search (2D default: the most accurate on the ITK cases), regular-step gradient descent (3D default) or
+gradient descent. The images keep their geometry (:func:`~.io.to_sitk`), so parameters compare directly with ours."""
 
 from __future__ import annotations
 

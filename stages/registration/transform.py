@@ -2,11 +2,10 @@
 ``Euler3DTransform``), on physical points.
 
 ``T(p) = R (p - c) + c + t``, ``c`` the fixed grid's centre, ``fixed(p) ~ moving(T(p))``; ``parameters`` are
-SimpleITK's, rotation first, radians: 2D ``(angle, tx, ty)`` with ``R(a) = [[cos a, -sin a], [sin a, cos a]]``,
-3D ``(ax, ay, az, tx, ty, tz)`` with ``R = Rz(az) Rx(ax) Ry(ay)`` (``ComputeZYX`` off). The dimensions differ only
-in this parametrisation. The thesis's ``R = [[cos a, sin a], [-sin a, cos a]]`` is ITK's ``R(-a)``
-(:func:`from_thesis`). See docs/registration.md, "Conventions".
-"""
+SimpleITK's, rotation first, radians: 2D ``(angle, tx, ty)`` with ``R(a) = [[cos a, -sin a], [sin a, cos a]]``, 3D
+``(ax, ay, az, tx, ty, tz)`` with ``R = Rz(az) Rx(ax) Ry(ay)`` (``ComputeZYX`` off). The dimensions differ only in this
+parametrisation. The thesis's ``R = [[cos a, sin a], [-sin a, cos a]]`` is ITK's ``R(-a)`` (:func:`from_thesis`). See
+docs/registration.md, "Conventions"."""
 
 from __future__ import annotations
 

@@ -244,3 +244,26 @@ def test_a_basin_only_the_shortlist_finds_flags_and_is_not_adopted(pd_slice, mon
     assert flagged.restarts == 0 and np.allclose(flagged.transform.parameters, stopped.transform.parameters)
     truth = RigidTransform.euler2d(3.0, -4.0, 45.0, pd_slice.center)
     assert _tre(pd_slice, flagged, truth) > 1.0 > _tre(pd_slice, adopted, truth)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_a_jt_result_is_climbed_by_mutual_information_and_only_flagged(pd_slice, small_t1, d):
+    """Twelfth round (``check.mi_agreement``): JT's result on a structured pair is climbed by mutual information at
+    the finest level. On a known transform of the same image both measures peak at the truth: MI ends a small
+    fraction of a unit away. With the limit below that distance the result is flagged ``agreement``, naming mutual
+    information; the transform is the same with the test off, on, and firing (its climb has a stream of its own)."""
+    fixed = pd_slice if d == 2 else small_t1
+    truth = RigidTransform.from_degrees((10.0, 4.0, -3.0) if d == 2 else (4.0, -3.0, 6.0, 3.0, -2.0, 1.5),
+                                        fixed.center)
+    moving = moved(fixed, truth)
+    default = register(fixed, moving)
+    off = register(fixed, moving, RegisterParams(check={"mi_agreement": 0}))
+    assert default.ok and "agreement" not in off.measures, default.reason
+    distance = default.measures["agreement"]
+    assert 0 < distance < 0.3
+    firing = register(fixed, moving, RegisterParams(check={"mi_agreement": distance / 2}))
+    assert not firing.ok and [f.check for f in firing.flags] == ["agreement"]
+    assert "mutual information" in firing.reason
+    for other in (off, firing):
+        np.testing.assert_array_equal(other.transform.parameters, default.transform.parameters)
+    assert _tre(fixed, default, truth) < 0.3
