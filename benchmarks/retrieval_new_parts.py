@@ -7,6 +7,7 @@ Usage (after indexing the collections with the default method, as docs/retrieval
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py costs
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py query-adaptive
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py intrinsic-gate
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py family-owa
 
 ``gps-grid``: k in 5 / 10 / 20 / 40, with Rustamov's shells or not; the rule, fixed before the run: the best mean mAP
 over the tune side (Watertight half A, half B and the tune collections), ties within 0.005 to the smaller k. The
@@ -230,16 +231,51 @@ def intrinsic_gate(args) -> None:
             flush=True)
 
 
+def family_owa(args) -> None:
+    """The default fusion's "two smallest averaged" made to look across the two families of parts (intrinsic: agd,
+    hks, shapedna, gps; extrinsic: d2, sh), so that two extrinsic parts agreeing on a wrong pair (one pose of two
+    characters) cannot make it close alone: ``split``, the mean of each family's smallest scaled dissimilarity;
+    ``intrinsic``, the two smallest when one of them is intrinsic, else the smallest and the smallest intrinsic one;
+    every kept part of the default's screen, then its manifold ranking; tune side only (an exploration, 2026-12-05:
+    nothing was built from it)."""
+    from retrieval_selection import nn_map
+
+    from topomatch.stages.retrieval.catalogue import METHODS
+    from topomatch.stages.retrieval.fusion import decide, fused_matrix, manifold_ranking, median_scale
+
+    base = METHODS["topomatch"].fusion
+
+    def fused(mats, parts, rule):
+        decision = decide([mats[p] for p in base.parts], base)
+        kept = [p for p in parts if p in decision.kept or p not in base.parts]
+        S = np.stack([mats[p] / median_scale(mats[p]) for p in kept])
+        intrinsic = np.array([p not in ("d2", "sh") for p in kept])
+        if rule == "split":
+            D = np.mean([S[f].min(axis=0) for f in (intrinsic, ~intrinsic) if f.any()], axis=0)
+        else:
+            two, best = np.sort(S, axis=0)[:2], S[intrinsic].min(axis=0)
+            D = np.where(best <= two[1], two.mean(axis=0), (two[0] + best) / 2)
+        return manifold_ranking(D, decision.rerank_k, base.rerank_alpha, base.rerank_normalisation)
+
+    colls = _tune_side(args, ("gps",))
+    print("setting | " + " | ".join(colls))
+    print("default | " + " | ".join("%.3f / %.3f" % nn_map(fused_matrix([m[p] for p in base.parts], base), labels)
+                                    for m, labels in colls.values()), flush=True)
+    for parts, rule in itertools.product((base.parts, base.parts + ("gps",)), ("split", "intrinsic")):
+        print(f"{rule}{' +gps' if 'gps' in parts else ''} | " + " | ".join(
+            "%.3f / %.3f" % nn_map(fused(m, parts, rule), labels) for m, labels in colls.values()), flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["gps-grid", "costs", "query-adaptive", "intrinsic-gate"])
+    ap.add_argument("what", choices=["gps-grid", "costs", "query-adaptive", "intrinsic-gate", "family-owa"])
     ap.add_argument("--stress", type=Path, default=Path("/tmp/stress"))
     ap.add_argument("--poses", type=Path, default=Path(os.environ.get("TOPOMATCH_POSES", "/tmp/poses")))
     ap.add_argument("--json", help="gps-grid: write the results here")
     args = ap.parse_args(argv)
     warnings.filterwarnings("ignore", module="topomatch")
     {"gps-grid": gps_grid, "costs": costs, "query-adaptive": query_adaptive,
-     "intrinsic-gate": intrinsic_gate}[args.what](args)
+     "intrinsic-gate": intrinsic_gate, "family-owa": family_owa}[args.what](args)
 
 
 if __name__ == "__main__":
