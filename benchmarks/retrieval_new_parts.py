@@ -8,6 +8,7 @@ Usage (after indexing the collections with the default method, as docs/retrieval
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py query-adaptive
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py intrinsic-gate
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py family-owa
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/retrieval_new_parts.py articulated-preset [--report]
 
 ``gps-grid``: k in 5 / 10 / 20 / 40, with Rustamov's shells or not; the rule, fixed before the run: the best mean mAP
 over the tune side (Watertight half A, half B and the tune collections), ties within 0.005 to the smaller k. The
@@ -215,16 +216,19 @@ def intrinsic_gate(args) -> None:
         return manifold_ranking(D, decision.rerank_k, base.rerank_alpha, base.rerank_normalisation)
 
     colls = _tune_side(args, ("gps",))
-    variants = [(i, t, s, p) for i in (("hks", "shapedna"), ("hks", "shapedna", "gps")) for t in (0.4, 0.5, 0.6, 0.7, 0.8)
-                for s in (0.0, 0.2) for p in ("min", "mean")]
+    variants = [(i, t, s, p) for i in (("hks", "shapedna"), ("hks", "shapedna", "gps"))
+                for t in (0.4, 0.5, 0.6, 0.7, 0.8) for s in (0.0, 0.2) for p in ("min", "mean")]
     print("setting | " + " | ".join(colls))
     print("default | " + " | ".join("%.3f / %.3f" % nn_map(fused_matrix([m[p] for p in base.parts], base), labels)
                                     for m, labels in colls.values()), flush=True)
+    def alone(m, intrinsic):
+        D = fuse([m[p] for p in intrinsic], [median_scale(m[p]) for p in intrinsic])
+        return manifold_ranking(D, decide([m[p] for p in base.parts], base).rerank_k, base.rerank_alpha,
+                                base.rerank_normalisation)
+
     for intrinsic in {v[0] for v in variants}:
         print(f"{'+'.join(intrinsic)} alone | " + " | ".join(
-            "%.3f / %.3f" % nn_map(manifold_ranking(fuse([m[p] for p in intrinsic], [median_scale(m[p]) for p in intrinsic]),
-                                                    decide([m[p] for p in base.parts], base).rerank_k, base.rerank_alpha,
-                                                    base.rerank_normalisation), labels) for m, labels in colls.values()))
+            "%.3f / %.3f" % nn_map(alone(m, intrinsic), labels) for m, labels in colls.values()))
     for intrinsic, tau, soft, pair in variants:
         print(f"{'+'.join(intrinsic)}, tau {tau:g}, soft {soft:g}, {pair} | " + " | ".join(
             "%.3f / %.3f" % nn_map(blended(m, intrinsic, tau, soft, pair), labels) for m, labels in colls.values()),
@@ -266,16 +270,69 @@ def family_owa(args) -> None:
             "%.3f / %.3f" % nn_map(fused(m, parts, rule), labels) for m, labels in colls.values()), flush=True)
 
 
+#: ``articulated-preset`` (2026-12-05, written before it was run): the part sets and combinations of a fused method for
+#: collections the user knows to be articulated (the same characters in other poses), every other setting the
+#: default's; chosen by the best mean mAP over the undegraded articulated tune collections, ties within 0.005 to fewer
+#: parts, then to the plain sum. The report collections are read for the pick only, once.
+PRESET_PARTS = [("hks", "shapedna"), ("hks", "gps"), ("shapedna", "gps"), ("hks", "shapedna", "gps"),
+                ("agd", "hks", "shapedna", "gps")]
+PRESET_TUNE = ["poses_tune"] + TUNE
+PRESET_REPORT = ["poses_report", "sumner", "sumner_open", "hires_report", "hires_twins_report", "twins_report",
+                 "strong_report", "strong_report_open", "similar_report", "fresh_report_open", "fresh2_report_open",
+                 "fresh_similar_report", "fresh2_similar_report"]
+
+
+def articulated_preset(args) -> None:
+    """The articulated preset's part set and combination chosen on the tune side (:data:`PRESET_PARTS`, sum or the two
+    smallest averaged); with ``--report``, the pick and the default on the report collections and Watertight."""
+    from dataclasses import replace
+
+    from retrieval_selection import load, nn_map
+
+    from topomatch.stages.retrieval.catalogue import METHODS
+    from topomatch.stages.retrieval.fusion import fused_matrix
+
+    base = METHODS["topomatch"].fusion
+    settings = {f"{'+'.join(parts)}, {'sum' if w is None else 'two smallest'}":
+                replace(base, parts=parts, order_weights=w, screen=None)
+                for parts in PRESET_PARTS for w in (None, (1, 1)) if w is None or len(parts) > 2}
+
+    def db(name):
+        return args.poses / f"{name}.db" if name.startswith("poses") else args.stress / f"{name}.db"
+
+    tune = {c: load(str(db(c)), ("gps",)) for c in PRESET_TUNE}
+    scores = {name: {c: nn_map(fused_matrix([m[p] for p in f.parts], f), labels) for c, (m, labels) in tune.items()}
+              for name, f in settings.items()}
+    print("setting | " + " | ".join(PRESET_TUNE) + " | mean mAP")
+    for name, r in scores.items():
+        print(f"{name} | " + " | ".join("%.3f / %.3f" % r[c] for c in PRESET_TUNE) +
+              f" | {np.mean([r[c][1] for c in PRESET_TUNE]):.4f}")
+    mean = {name: float(np.mean([r[c][1] for c in PRESET_TUNE])) for name, r in scores.items()}
+    top = max(mean.values())
+    pick = min((n for n in settings if mean[n] >= top - 0.005),
+               key=lambda n: (len(settings[n].parts), settings[n].order_weights is not None, -mean[n]))
+    print(f"pick: {pick} (mean mAP {mean[pick]:.4f}; best {top:.4f})")
+    if not args.report:
+        return
+    print("report collection | default | " + pick)
+    for c in ["Watertight"] + PRESET_REPORT:
+        m, labels = load(str(args.stress / "wt.db" if c == "Watertight" else db(c)), ("gps",))
+        print(f"{c} | " + " | ".join("%.3f / %.3f" % nn_map(fused_matrix([m[p] for p in f.parts], f), labels)
+                                    for f in (base, settings[pick])), flush=True)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("what", choices=["gps-grid", "costs", "query-adaptive", "intrinsic-gate", "family-owa"])
+    ap.add_argument("what", choices=["gps-grid", "costs", "query-adaptive", "intrinsic-gate", "family-owa",
+                                           "articulated-preset"])
     ap.add_argument("--stress", type=Path, default=Path("/tmp/stress"))
     ap.add_argument("--poses", type=Path, default=Path(os.environ.get("TOPOMATCH_POSES", "/tmp/poses")))
     ap.add_argument("--json", help="gps-grid: write the results here")
+    ap.add_argument("--report", action="store_true", help="articulated-preset: the pick on the report collections")
     args = ap.parse_args(argv)
     warnings.filterwarnings("ignore", module="topomatch")
-    {"gps-grid": gps_grid, "costs": costs, "query-adaptive": query_adaptive,
-     "intrinsic-gate": intrinsic_gate, "family-owa": family_owa}[args.what](args)
+    {"gps-grid": gps_grid, "costs": costs, "query-adaptive": query_adaptive, "intrinsic-gate": intrinsic_gate,
+     "family-owa": family_owa, "articulated-preset": articulated_preset}[args.what](args)
 
 
 if __name__ == "__main__":
