@@ -625,8 +625,9 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     """Another basin is better (:func:`_better_basin`), found by the grid's ``check.candidates`` best transforms
-    (adopted with ``check.retry``) or, when they find none, by :meth:`_Run.shortlisted`, which only flags: adopting
-    a basin the grid ranked low added silent errors where the measure cannot be trusted."""
+    (adopted with ``check.retry``) or, when they find none, by :meth:`_Run.shortlisted`, adopted only on a pair
+    measured at order 1 (outline-only or discrete; thirteenth round): on a mask read as an image, adopting a basin
+    the grid ranked low added silent errors (tenth round)."""
     c = run.params.check
     if not c.search:
         return []
@@ -635,7 +636,7 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     if flags or c.shortlist <= c.candidates:
         return flags
     more = [p for p in run.shortlisted(theta) if not any(np.array_equal(p, q) for q in probes)]
-    return _better_basin(run, theta, value, more, adopt=False)
+    return _better_basin(run, theta, value, more, adopt=run.outline_measure)
 
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
