@@ -122,6 +122,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``blur`` (tune side, declared after ``final7``): the two resampled kinds, MNI sections (every frame, tight
   included), ITK slices, MNI, KmeansTest and ``anatomical.nii`` volumes (seeds 20xx): the class the ninth round's
   attack left silently wrong (silhouettes moved by interpolation), where choosing is allowed; never reported.
+- ``turn`` (tune side, declared after ``final10``): 2D cases of every source and kind rotated by 20-60 degrees (each
+  angle's magnitude moved from [0, 20] onto [20, 60]: ``bounds.max_angle`` is 60, the other splits stop at 20; seeds
+  2142-2172): a class the corpus never held (a silhouette turned by 45 degrees was found silently wrong by hand); never
+  reported.
 - ``capture`` (tune side, declared after ``final6``): ITK slices (2D) and nibabel's ``anatomical.nii`` (3D) as label
   maps, silhouettes, thresholded and saturated images, swapped, cropped, thick (seeds 19xx): the sources and kinds of
   ``final6``'s gross wrong basins, to look for that class where choosing is allowed; never reported.
@@ -232,6 +236,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
     "blur": {3: [("mni", 10), ("kmeans", 10), ("anatomical", 10)],
              2: [("mni-axial", 30), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 20)]},
+    "turn": {2: [("mni-axial", 30), ("mni-coronal", 30), ("mni-sagittal", 30), ("itk", 30)]},
 }
 """Per split and dimension: (source, number of cases), in the order the cases are interleaved."""
 
@@ -258,7 +263,9 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
-         "blur": ("silhouette_resampled", "labels_resampled")}
+         "blur": ("silhouette_resampled", "labels_resampled"),
+         "turn": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
+                  "silhouette_resampled", "labels_resampled")}
 
 SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tune", "kmeans", 3): 1203, ("tune", "anatomical", 3): 1303, ("tune", "mni-coronal", 2): 1402,
@@ -313,9 +320,11 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
          ("blur", "mni", 3): 2003, ("blur", "kmeans", 3): 2013, ("blur", "anatomical", 3): 2023,
          ("blur", "mni-axial", 2): 2002, ("blur", "mni-coronal", 2): 2012, ("blur", "mni-sagittal", 2): 2022,
-         ("blur", "itk", 2): 2032}
+         ("blur", "itk", 2): 2032,
+         ("turn", "mni-axial", 2): 2142, ("turn", "mni-coronal", 2): 2152, ("turn", "mni-sagittal", 2): 2162,
+         ("turn", "itk", 2): 2172}
 
-SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, "dev": 2, "report": 3, "confirm": 4,
+SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, "turn": 1.9, "dev": 2, "report": 3, "confirm": 4,
                "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
                "final5": 10, "final6": 11, "final7": 12,
@@ -330,6 +339,8 @@ PD_VALUES = (1.0, 0.86, 0.77)
 CONTRAST_SCALE = 200.0
 MAX_TRANSLATION = 15.0
 MAX_ANGLE = {2: 20.0, 3: 15.0}
+TURN_ANGLES = (20.0, 60.0)
+"""``turn``: each 2D angle's magnitude moved from [0, MAX_ANGLE] onto this range (degrees)."""
 THICK_SLICE_MM = 4.0
 SUCCESS_TRE = 1.0
 
@@ -550,6 +561,11 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     kind = kinds[(index + place) % len(kinds)]
     swapped = kind in SWAPPABLE and (index + place) // len(kinds) % 3 == 1  # the 2nd, 5th, 8th ... of its kind
     truth = random_transform(rng, (0.0,) * dim, max_angle=MAX_ANGLE[dim], max_translation=MAX_TRANSLATION)
+    if split == "turn":
+        lo, hi = np.radians(TURN_ANGLES)
+        a = np.asarray(truth.angles)
+        truth = RigidTransform(tuple(np.sign(a) * (lo + (hi - lo) * np.abs(a) / np.radians(MAX_ANGLE[dim])))
+                               + tuple(truth.translation), truth.center)
     noise_fixed, noise_moving = (float(v) for v in rng.uniform(0.01, 0.03, size=2))
     bias_on, bias_amplitude, bias_coefficients = rng.uniform() < 0.5, float(rng.uniform(0.1, 0.2)), rng.normal(size=9)
     thick = bool(rng.uniform() < 0.3) and dim == 3
@@ -559,7 +575,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
     tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
-                      "final8", "final9", "final10", "final11", "edge", "tight", "blur")
+                      "final8", "final9", "final10", "final11", "edge", "tight", "blur", "turn")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     if split == "tight":  # every section tightly cropped (the same draws otherwise)

@@ -267,3 +267,22 @@ def test_a_jt_result_is_climbed_by_mutual_information_and_only_flagged(pd_slice,
     for other in (off, firing):
         np.testing.assert_array_equal(other.transform.parameters, default.transform.parameters)
     assert _tre(fixed, default, truth) < 0.3
+
+
+def test_on_an_outline_only_pair_a_basin_only_the_shortlist_finds_is_adopted(pd_slice, monkeypatch):
+    """Thirteenth round: the PD slice against its own silhouette misaligned by 45 degrees, with the grid's own probes
+    taken away. The pair is measured at order 1 (outline-only), so the basin the shortlisted probes find is adopted
+    (``restarts`` 1) and the truth recovered; with ``check.shortlist`` 0 the run stays where the schedule left it."""
+    from topomatch.stages.registration import register as reg_module
+    from topomatch.stages.registration.structure import object_mask
+
+    silhouette = pd_slice.with_data(np.where(object_mask(pd_slice), 100.0, 0.0), name="silhouette")
+    truth = RigidTransform.euler2d(3.0, -4.0, 45.0, pd_slice.center)
+    moving = moved(silhouette, truth)
+    grid_own = reg_module._Run.candidates
+    monkeypatch.setattr(reg_module._Run, "candidates",
+                        lambda self, theta, n=None: [] if n is None else grid_own(self, theta, n))
+    adopted = register(pd_slice, moving)
+    stopped = register(pd_slice, moving, RegisterParams(check={"shortlist": 0}))
+    assert adopted.measures["outline_alpha"] == 1.0 and adopted.restarts == 1
+    assert _tre(pd_slice, adopted, truth) < 1.0 < _tre(pd_slice, stopped, truth)
