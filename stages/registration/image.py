@@ -187,10 +187,9 @@ def border(shape) -> np.ndarray:
 def foreground_mask(image: Image) -> np.ndarray:
     """The image's content (bool, the shape of ``image.data``), from Otsu's two classes and the grid's border.
 
-    The class above the threshold when at most half the border is above it (a bright head on a dark
-    background); the class below when at least 90 % of the border is above it (a dark object on a bright
-    background: an inverted image, a negative); the whole grid in between (the object fills the frame: no
-    background to tell it from)."""
+    The class above the threshold when at most half the border is above it (a bright head on a dark background); the
+    class below when at least 90 % of the border is above it (a dark object on a bright background: an inverted image, a
+    negative); the whole grid in between (the object fills the frame: no background to tell it from)."""
     above = image.data > otsu_threshold(image.data)
     share = float(above[border(above.shape)].mean())
     if share <= 0.5:

@@ -1,9 +1,8 @@
 """Registration's input kinds: single ``images`` (state ``path``) and image ``pairs`` (state ``fixed_path``,
 ``moving_path`` and the known transform ``truth``), listed in the config or in a CSV table (``pairs_csv``).
 
-``truth`` is a mapping of parameter names to values ({tx, ty, angle} in 2D, {tx, ty, tz, ax, ay, az} in 3D),
-or None when the pair has no known transform (the ``evaluate`` stages then refuse it).
-"""
+``truth`` is a mapping of parameter names to values ({tx, ty, angle} in 2D, {tx, ty, tz, ax, ay, az} in 3D), or None
+when the pair has no known transform (the ``evaluate`` stages then refuse it)."""
 
 from __future__ import annotations
 

@@ -1,9 +1,8 @@
 """Objective landscapes (thesis Figs. 2.9-2.15): the measure as each parameter varies alone, 2D and 3D.
 
-Around a centre ``theta_0`` (the transform's parameters in SimpleITK's order, angles in degrees), each
-parameter in turn is moved over a range while the others stay at ``theta_0``; the joint histogram is computed
-once per point and every order ``alpha`` of :attr:`LandscapeParams.alphas` is evaluated on it.
-"""
+Around a centre ``theta_0`` (the transform's parameters in SimpleITK's order, angles in degrees), each parameter in turn
+is moved over a range while the others stay at ``theta_0``; the joint histogram is computed once per point and every
+order ``alpha`` of :attr:`LandscapeParams.alphas` is evaluated on it."""
 
 from __future__ import annotations
 

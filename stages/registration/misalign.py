@@ -1,14 +1,13 @@
 """Synthetic misalignments with a known answer, 2D and 3D: the moving image is an image moved by a rigid T.
 
-For a source image S and a rigid T (fixed-to-moving, :mod:`~topomatch.stages.registration.transform`) the moving
-image is ``M(q) = S(T^-1(q))`` on S's grid, so ``M(T(p)) = S(p)``: registering M to S must return T. Pixels whose
-preimage falls outside S are ``fill``. The resampling is a cubic B-spline by default, not the N-linear interpolation
-the registration uses, so the test is not answered by the interpolation that made it. A case may also get another
-contrast (:func:`t2_like`), be cropped to a slab (:func:`crop_slab`) and get Gaussian noise.
+For a source image S and a rigid T (fixed-to-moving, :mod:`~topomatch.stages.registration.transform`) the moving image
+is ``M(q) = S(T^-1(q))`` on S's grid, so ``M(T(p)) = S(p)``: registering M to S must return T. Pixels whose preimage
+falls outside S are ``fill``. The resampling is a cubic B-spline by default, not the N-linear interpolation the
+registration uses, so the test is not answered by the interpolation that made it. A case may also get another contrast
+(:func:`t2_like`), be cropped to a slab (:func:`crop_slab`) and get Gaussian noise.
 
 Random case ``index`` of a sweep (:func:`random_transform`) is drawn from ``numpy.random.default_rng([seed, index])``:
-the same whatever the other cases are.
-"""
+the same whatever the other cases are."""
 
 from __future__ import annotations
 

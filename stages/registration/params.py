@@ -1,12 +1,11 @@
 """Parameters of :func:`~topomatch.stages.registration.register.register`, 2D and 3D alike, grouped as DIPY's
-``AffineRegistration`` and SimpleITK's ``ImageRegistrationMethod`` group them: ``metric``, ``optimizer``,
-``schedule`` (a list of :class:`LevelSpec`), ``transform`` and ``start``, ``bounds``, ``sampling``, ``check``,
-``seed``. Angles in degrees, lengths in physical units (pixels for a PNG, mm for a volume); in a config
-``metric: mi`` is ``metric: {name: mi}``.
+``AffineRegistration`` and SimpleITK's ``ImageRegistrationMethod`` group them: ``metric``, ``optimizer``, ``schedule``
+(a list of :class:`LevelSpec`), ``transform`` and ``start``, ``bounds``, ``sampling``, ``check``, ``seed``. Angles in
+degrees, lengths in physical units (pixels for a PNG, mm for a volume); in a config ``metric: mi`` is ``metric: {name:
+mi}``.
 
-**The dimension enters here, once**: :data:`DIMENSION_DEFAULTS` holds what differs between 2D and 3D, applied
-by :func:`for_dimension` under whatever the caller set (a value from a config, the command line or the API wins).
-"""
+**The dimension enters here, once**: :data:`DIMENSION_DEFAULTS` holds what differs between 2D and 3D, applied by
+:func:`for_dimension` under whatever the caller set (a value from a config, the command line or the API wins)."""
 
 from __future__ import annotations
 

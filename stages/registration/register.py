@@ -5,8 +5,7 @@ maximising a measure of chapter 2 of the joint histogram of ``fixed(p)`` and ``m
 centroids; in 3D a search of translations), a pyramid of levels in physical units (each a :class:`~.objective.Objective`
 on its own :class:`JointHistogram`), SPSA or Powell per level with angles scaled by the RMS radius, and a self-check
 (:data:`CHECKS`, each test returning typed :class:`Flag` s). One run loop for both dimensions: the dimension enters
-through the transform's parametrisation and :func:`~.params.for_dimension`. See docs/registration.md.
-"""
+through the transform's parametrisation and :func:`~.params.for_dimension`. See docs/registration.md."""
 
 from __future__ import annotations
 
@@ -559,8 +558,9 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     """The pair is outline-only (``run.outline_only``: a mask, a silhouette) and its outline does not pin the result
     down: the two outlines lie more than ``check.outline_gap`` apart at the result (they do not correspond there),
     the finer levels left the optimum a coarser level found (the consistency measure above ``check.outline_drop``),
-    or the grid's border cuts away more of the outline-only image's object than ``check.min_outline_view`` leaves
-    (:func:`~.structure.outline_in_view`). Such a pair passing all three is accepted."""
+    or the grid's border, or the other image's field of view at the result, cuts away more of the outline-only image's
+    object than ``check.min_outline_view`` leaves (:func:`~.structure.outline_in_view`). Such a pair passing all three
+    is accepted."""
     c = run.params.check
     if not run.outline_only:
         return []
@@ -568,19 +568,21 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     flat = [f"the {key.partition('_')[2]} image {OUTLINE_TESTS[test][1].format(value)}; min_{test} {limit:g})"
             for key, value, test, limit in below]
     roles = sorted({key.partition("_")[2] for key, *_ in below})  # the outline-only image(s): fixed, moving
-    views = [(outline_in_view(getattr(run, r)), r) for r in roles]
+    at, other = run.at(theta), {"fixed": "moving", "moving": "fixed"}
+    views = [(outline_in_view(getattr(run, r), getattr(run, other[r]), at if r == "fixed" else at.inverse()), r)
+             for r in roles]
     view, role = min(((v, r) for v, r in views if math.isfinite(v)), default=(1.0, None))
     if role is not None:
         run.measures["outline_view"] = view
-    gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, run.at(theta))
+    gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, at)
     drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
     why = ([f"the outlines lie {gap:.2f} units apart at the result (outline_gap {c.outline_gap:g}): they do not "
             f"correspond there" if math.isfinite(gap) else "the outlines cannot be compared at the result"]
            if not gap <= c.outline_gap else []) + \
           ([f"the finest level left the optimum a coarser level found (its measure {drop:.1%} lower there; "
             f"outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else []) + \
-          ([f"only {view:.0%} of the {role} image's object boundary is outline inside the grid, the rest is cut by "
-            f"the grid's border (min_outline_view {c.min_outline_view:.0%})"] if view < c.min_outline_view else [])
+          ([f"only {view:.0%} of the {role} image's object boundary is outline that both images see, the rest is cut "
+            f"by a grid's border (min_outline_view {c.min_outline_view:.0%})"] if view < c.min_outline_view else [])
     if not why:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "
@@ -712,9 +714,8 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
 
     ``params`` fields not set take the dimension's defaults (:func:`~.params.for_dimension`); ``fixed_mask`` (bool,
     shape of ``fixed.data``): the fixed pixels to sample instead of ``params.sampling``; ``callback(level, k, theta,
-    value)`` after every optimiser iteration, True stopping the level. StageError: images of different
-    dimensionality, a mask that selects nothing or has another shape, a failed self-check with ``on_failure='error'``.
-    """
+    value)`` after every optimiser iteration, True stopping the level. StageError: images of different dimensionality, a
+    mask that selects nothing or has another shape, a failed self-check with ``on_failure='error'``."""
     t0 = time.perf_counter()
     if fixed.dim != moving.dim:
         raise StageError(f"cannot register a {moving.dim}D moving image to a {fixed.dim}D fixed image")

@@ -1,7 +1,6 @@
 """Reports of the registration experiments (thesis ch. 2): the figures 2.2-2.15 (analytic curves, conditional
-distributions, recovered parameters, landscapes), overlays of registered pairs, and tables of the registrations
-and of their accuracy per method.
-"""
+distributions, recovered parameters, landscapes), overlays of registered pairs, and tables of the registrations and of
+their accuracy per method."""
 
 from __future__ import annotations
 

@@ -1,10 +1,9 @@
-"""The outline-only tests of the self-check (``register.OUTLINE_TESTS``, ``register.check_outline``): how much
-of an image's structure lies inside its outline (a mask or silhouette has none), and how far apart two objects'
-outlines lie under a transform. Their thresholds and the scores on the corpus: docs/registration.md.
+"""The outline-only tests of the self-check (``register.OUTLINE_TESTS``, ``register.check_outline``): how much of an
+image's structure lies inside its outline (a mask or silhouette has none), and how far apart two objects' outlines lie
+under a transform. Their thresholds and the scores on the corpus: docs/registration.md.
 
-Written with numpy (box grows, a geodesic flood fill, ``image.gaussian_blur``): ``scipy.ndimage`` would cost
-a 2D registration 0.12-0.18 s of import, as much as the registration.
-"""
+Written with numpy (box grows, a geodesic flood fill, ``image.gaussian_blur``): ``scipy.ndimage`` would cost a 2D
+registration 0.12-0.18 s of import, as much as the registration."""
 
 from __future__ import annotations
 
@@ -68,17 +67,24 @@ def analysed_copy(image: Image) -> Image:
     return image.shrink([2 if n >= 48 else 1 for n in image.data.shape[::-1]])
 
 
-@once_per_image
-def outline_in_view(image: Image) -> float:
+def outline_in_view(image: Image, other: Image | None = None, transform=None) -> float:
     """Fraction of the boundary of the object (:func:`object_mask`) that is its outline inside the grid rather
     than the grid's border cutting it (unit-free in [0, 1]): the physical area (length in 2D) of the pixel faces
     between object and background over that plus the object's pixel faces on the grid's border. 1 for an object
-    clear of the border, near 0 for one that fills the grid; NaN for an empty object."""
+    clear of the border, near 0 for one that fills the grid; NaN for an empty object. With ``other`` and
+    ``transform`` (this image's points to ``other``'s), an outline face whose centre lands outside ``other``'s grid
+    counts as cut too: the other image does not see it (a cropped partner; fourteenth round)."""
     obj = object_mask(image)
     spacing = np.asarray(image.spacing, dtype=np.float64)[::-1]  # array axis order
     face = np.prod(spacing) / spacing  # area of a pixel face normal to each array axis
-    inside = sum(face[a] * np.count_nonzero(np.diff(obj, axis=a)) for a in range(obj.ndim))
-    cut = sum(face[a] * np.count_nonzero(np.take(obj, [0, -1], axis=a)) for a in range(obj.ndim))
+    inside, cut = 0.0, sum(face[a] * np.count_nonzero(np.take(obj, [0, -1], axis=a)) for a in range(obj.ndim))
+    for a in range(obj.ndim):
+        faces = np.argwhere(np.diff(obj, axis=a)).astype(np.float64)
+        faces[:, a] += 0.5
+        seen = len(faces) if other is None else int(np.count_nonzero(np.all(np.abs(other.continuous_index(
+            transform.apply(image.physical(faces[:, ::-1]))) - (np.asarray(other.size) - 1) / 2)
+            <= np.asarray(other.size) / 2, axis=1)))
+        inside, cut = inside + face[a] * seen, cut + face[a] * (len(faces) - seen)
     return float(inside / (inside + cut)) if inside + cut > 0 else float("nan")
 
 

@@ -269,20 +269,21 @@ def test_a_jt_result_is_climbed_by_mutual_information_and_only_flagged(pd_slice,
     assert _tre(fixed, default, truth) < 0.3
 
 
-def test_on_an_outline_only_pair_a_basin_only_the_shortlist_finds_is_adopted(pd_slice, monkeypatch):
-    """Thirteenth round: the PD slice against its own silhouette misaligned by 45 degrees, with the grid's own probes
-    taken away. The pair is measured at order 1 (outline-only), so the basin the shortlisted probes find is adopted
-    (``restarts`` 1) and the truth recovered; with ``check.shortlist`` 0 the run stays where the schedule left it."""
+@pytest.mark.parametrize("outline", [False, True])
+def test_shortlisted_probes_are_adopted_only_on_a_pair_measured_at_order_one(pd_slice, monkeypatch, outline):
+    """Thirteenth round: the capture test asks the grid's own probes (a winner adopted), then the shortlisted ones,
+    whose winner is adopted on a pair measured at order 1 (here the PD slice against its own silhouette) and only
+    flags on a structured pair (the slice against itself)."""
     from topomatch.stages.registration import register as reg_module
     from topomatch.stages.registration.structure import object_mask
 
-    silhouette = pd_slice.with_data(np.where(object_mask(pd_slice), 100.0, 0.0), name="silhouette")
-    truth = RigidTransform.euler2d(3.0, -4.0, 45.0, pd_slice.center)
-    moving = moved(silhouette, truth)
-    grid_own = reg_module._Run.candidates
-    monkeypatch.setattr(reg_module._Run, "candidates",
-                        lambda self, theta, n=None: [] if n is None else grid_own(self, theta, n))
-    adopted = register(pd_slice, moving)
-    stopped = register(pd_slice, moving, RegisterParams(check={"shortlist": 0}))
-    assert adopted.measures["outline_alpha"] == 1.0 and adopted.restarts == 1
-    assert _tre(pd_slice, adopted, truth) < 1.0 < _tre(pd_slice, stopped, truth)
+    calls, real = [], reg_module._better_basin
+
+    def spy(run, theta, value, probes, *, adopt):
+        calls.append((adopt, run.outline_measure))
+        return real(run, theta, value, probes, adopt=adopt)
+
+    monkeypatch.setattr(reg_module, "_better_basin", spy)
+    source = pd_slice.with_data(np.where(object_mask(pd_slice), 100.0, 0.0)) if outline else pd_slice
+    reg = register(pd_slice, _moved(source, 3.0, -4.0, 10.0))
+    assert reg.ok and calls == [(True, outline), (outline, outline)], (reg.reason, calls)

@@ -114,6 +114,25 @@ def test_outline_in_view_of_a_box_clear_of_or_cut_by_the_border(spacing):
     assert outline_in_view(Image(across, spacing=spacing)) == pytest.approx(1 - walls / total)
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_outline_in_view_counts_what_a_cropped_partner_does_not_see(d):
+    """Fourteenth round: a box clear of its grid's border, seen by a partner grid that ends halfway along the last
+    array axis (identity transform): the faces past the partner's last pixel centre + 1/2 are cut. In 2D a 10 x 20
+    box (rows x columns) whose columns 10-29 meet a partner of 20 columns: 10 of its 20 side faces and 20 of its 40
+    top and bottom faces are seen, 30 of 60; in 3D the same box 6 slices deep: 200 of 400, 120 of 240 and 60 of
+    120 faces normal to the three axes, 380 of 760."""
+    from topomatch.stages.registration.transform import RigidTransform
+
+    shape, box = ((40, 40), (slice(10, 20), slice(10, 30))) if d == 2 else \
+        ((12, 40, 40), (slice(3, 9), slice(10, 20), slice(10, 30)))
+    data = np.zeros(shape)
+    data[box] = 100.0
+    image, partner = Image(data), Image(np.zeros(shape[:-1] + (20,)))
+    identity = RigidTransform.identity(tuple(image.center))
+    assert outline_in_view(image) == pytest.approx(1.0)
+    assert outline_in_view(image, partner, identity) == pytest.approx(30 / 60 if d == 2 else 380 / 760)
+
+
 def test_a_silhouette_pair_is_flagged_when_its_levels_disagree_and_the_check_can_be_turned_off(pd_slice):
     """``outline_gap 0`` flags every silhouette pair; by default the flag follows the recorded measures (the
     outlines' gap at the result above ``outline_gap``, or the finest level left a coarser level's optimum by
