@@ -22,6 +22,10 @@ uniform, 2 % noise, +-15 deg / +-15 mm). Moving kinds (each moved by a random ri
 (the same window in both grids; physical coordinates kept), so that the object fills much of the grid: the frame in
 which ``interior_structure`` and ``interior_spread`` cannot judge and ``check.min_residual`` does.
 
+``--frame partner`` (2026-12-05, after a hand probe found it silently wrong) swaps the roles: the kind's image,
+unmoved, with noise, is the *fixed* image, and the source moved by the truth and cut to a slab of 60-80 % of one axis
+(``misalign.crop_slab``) the moving one, so that the moving image sees only part of the fixed outline.
+
 Correct = mean TRE over the fixed content <= 1 pixel (2D) or 1 mm (3D), as in the corpus. Counts per kind:
 ok (correct, passed) / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
 
@@ -47,7 +51,7 @@ import registration_corpus as corpus  # noqa: E402  (files, methods and TRE as t
 from topomatch.pipeline.paths import data_root  # noqa: E402
 from topomatch.stages.registration.image import Image, otsu_threshold  # noqa: E402
 from topomatch.stages.registration.io import read_image  # noqa: E402
-from topomatch.stages.registration.misalign import moved  # noqa: E402
+from topomatch.stages.registration.misalign import crop_slab, moved  # noqa: E402
 from topomatch.stages.registration.transform import RigidTransform, n_angles  # noqa: E402
 
 SOURCES_2D = ("BrainMidSagittalSlice.png", "FatMRISlice.png", "VisibleWomanHeadSlice.png", "VisibleWomanEyeSlice.png",
@@ -121,6 +125,11 @@ def cases(seeds: int, kinds: tuple[str, ...] = KINDS, frame: str = "full"):
                 else:
                     moving = moved(base, truth, order=1, noise=NOISE, rng=rng)
                 fixed = source
+                if frame == "partner":  # module docstring; the discrete kinds are made after a move: not asked
+                    noise = 0.0 if kind == "same" else NOISE * float(np.ptp(base.data))
+                    fixed = base.with_data(base.data + noise * rng.normal(size=base.data.shape))
+                    moving = crop_slab(moved(source, truth, order=1, noise=NOISE, rng=rng), int(rng.integers(source.dim)),
+                                       float(rng.uniform(0.6, 0.8)), float(rng.uniform()))
                 if frame == "tight":
                     window = tight_window(source, rng)
                     fixed, moving = cropped(source, window), cropped(moving, window)
@@ -132,13 +141,15 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seeds", type=int, default=4, help="random transforms per source and kind")
     ap.add_argument("--metrics", default="jt,mi")
     ap.add_argument("--kinds", default=",".join(KINDS), help=f"any of {', '.join(ALL_KINDS)}")
-    ap.add_argument("--frame", choices=("full", "tight"), default="full")
+    ap.add_argument("--frame", choices=("full", "tight", "partner"), default="full")
     ap.add_argument("--params", default="", help="JSON overrides of the register parameters (a counterfactual)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     kinds = tuple(k for k in args.kinds.split(",") if k)
     if set(kinds) - set(ALL_KINDS):
         ap.error(f"unknown kinds {sorted(set(kinds) - set(ALL_KINDS))}")
+    if args.frame == "partner" and set(kinds) & set(DISCRETE_KINDS):
+        ap.error(f"--frame partner takes the kinds {', '.join(KINDS)} (the discrete kinds are made after a move)")
     corpus.PARAMS.update(json.loads(args.params) if args.params else {})
     runners = {f"ours-{m}": (lambda m: lambda *a: corpus.run_ours(m, *a))(m) for m in args.metrics.split(",")}
     if corpus.elastix_available():

@@ -185,11 +185,11 @@ class CheckSpec(Params):
                                            "outline) at the result: outlines that do not correspond at all "
                                            "(the validation corpus's correct outline-only results: at most 5.8); "
                                            "0 flags every such pair")
-    min_outline_view: float = Field(0.45, ge=0, le=1, allow_inf_nan=False,
-                                    description="such a pair is flagged when less than this fraction of the "
-                                                "outline-only image's object boundary is outline inside the grid "
-                                                "(the rest is the grid's border cutting the object: a tight field "
-                                                "of view; structure.outline_in_view; 0: this test is off)")
+    min_outline_view: float = Field(0.45, ge=0, le=1, allow_inf_nan=False, description="such a pair is flagged when "
+                                    "less than this fraction of the outline-only image's object boundary is outline "
+                                    "inside the grid, the rest cut by a border (structure.outline_in_view; 0: off)")
+    outline_view_partner: bool = Field(True, description="the outline in view counts only what the other image "
+                                       "sees at the result (a cropped partner's border cuts it too)")
     outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
                                 description="such a pair is flagged when a coarser level's measure is lower at the "
                                             "result than at its own end by more than this fraction (the "
@@ -281,7 +281,8 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "bounds": {"max_angle": 45.0},
         "coarse_overlap_power": 1.0,
         "check": {"grid": 5, "min_content": 0.0, "min_prominence": 0.0, "min_flatness": 0.0, "overlap_bound": False,
-                  "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30},
+                  "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
+                  "outline_view_partner": False},
     },
 }
 

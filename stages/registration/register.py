@@ -478,10 +478,9 @@ def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
-    """A biased optimum: from the result, the finest level's schedule entry climbs a second measure on the same samples
-    and ends more than a limit away: JT (alpha 2, histogram weights) for every other measure (``check.agreement``:
-    Tsallis MI on multimodal pairs), mutual information for JT itself (``check.mi_agreement``, twelfth round: JT's
-    optimum off where MI's is not). Not asked on outline-only pairs, whose measure is already of order 1."""
+    """A biased optimum: from the result, the finest level climbs a second measure on the same samples and ends more
+    than a limit away: JT (alpha 2) for every other measure (``check.agreement``), mutual information for JT itself
+    (``check.mi_agreement``, twelfth round). Not asked on outline-only pairs, whose measure is already of order 1."""
     m, c = run.params.metric, run.params.check
     thesis = m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"
     limit = c.mi_agreement if thesis else c.agreement
@@ -569,8 +568,8 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
             for key, value, test, limit in below]
     roles = sorted({key.partition("_")[2] for key, *_ in below})  # the outline-only image(s): fixed, moving
     at, other = run.at(theta), {"fixed": "moving", "moving": "fixed"}
-    views = [(outline_in_view(getattr(run, r), getattr(run, other[r]), at if r == "fixed" else at.inverse()), r)
-             for r in roles]
+    views = [(outline_in_view(getattr(run, r), *((getattr(run, other[r]), at if r == "fixed" else at.inverse())
+                                                if c.outline_view_partner else ())), r) for r in roles]
     view, role = min(((v, r) for v, r in views if math.isfinite(v)), default=(1.0, None))
     if role is not None:
         run.measures["outline_view"] = view
