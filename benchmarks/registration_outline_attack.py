@@ -57,6 +57,9 @@ from topomatch.stages.registration.transform import RigidTransform, n_angles  # 
 SOURCES_2D = ("BrainMidSagittalSlice.png", "FatMRISlice.png", "VisibleWomanHeadSlice.png", "VisibleWomanEyeSlice.png",
               "RatLungSlice1.mha")
 SOURCES_3D = ("KmeansTest_T1RawSkullStrip.nii.gz",)
+BUNDLED_2D = ("BrainT1Slice.png", "BrainProtonDensitySlice.png")
+"""``--sources bundled``: the two ITK slices the project ships (``data/images/itk``), which the corpus draws from; the
+hand probes of 2026-12-05 (a silhouette against a cropped partner) were made from them."""
 KINDS = ("same", "labels", "silhouette0", "silhouette1", "silhouette2")
 DISCRETE_KINDS = ("threshold", "posterized")
 ALL_KINDS = KINDS + DISCRETE_KINDS
@@ -108,12 +111,14 @@ def random_truth(rng: np.random.Generator, image: Image) -> RigidTransform:
     return RigidTransform((*angles, *rng.uniform(-15, 15, image.dim)), tuple(image.center))
 
 
-def cases(seeds: int, kinds: tuple[str, ...] = KINDS, frame: str = "full"):
+def cases(seeds: int, kinds: tuple[str, ...] = KINDS, frame: str = "full", sources: str = "examples"):
     """(id, fixed, moving, truth, kind) for every source, kind and seed (``frame``: module docstring)."""
     folder = data_root() / "images" / "itk_examples_data" if data_root() else None
-    if folder is None or not folder.is_dir():
+    if sources == "bundled":
+        folder = corpus.ITK_DIR
+    elif folder is None or not folder.is_dir():
         raise SystemExit("set TOPOMATCH_DATA_ROOT to the shared data (images/itk_examples_data)")
-    for name in SOURCES_2D + SOURCES_3D:
+    for name in BUNDLED_2D if sources == "bundled" else SOURCES_2D + SOURCES_3D:
         source = read_image(folder / name)
         for kind in kinds:
             base = source if kind in DISCRETE_KINDS else moving_source(source, kind)
@@ -142,6 +147,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--metrics", default="jt,mi")
     ap.add_argument("--kinds", default=",".join(KINDS), help=f"any of {', '.join(ALL_KINDS)}")
     ap.add_argument("--frame", choices=("full", "tight", "partner"), default="full")
+    ap.add_argument("--sources", choices=("examples", "bundled"), default="examples",
+                    help="the ITK example images of the data root (never drawn by the corpus), or the two bundled slices")
     ap.add_argument("--params", default="", help="JSON overrides of the register parameters (a counterfactual)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
@@ -156,7 +163,7 @@ def main(argv: list[str] | None = None) -> None:
         runners["elastix"] = corpus.run_elastix
     rows, counts = [], collections.Counter()
     with tempfile.TemporaryDirectory() as tmp:
-        for cid, fixed, moving, truth, kind in cases(args.seeds, kinds, args.frame):
+        for cid, fixed, moving, truth, kind in cases(args.seeds, kinds, args.frame, args.sources):
             fixed_path, moving_path = Path(tmp) / f"{cid}_fixed.nii.gz", Path(tmp) / f"{cid}_moving.nii.gz"
             corpus.write_image(fixed, fixed_path)
             corpus.write_image(moving, moving_path)
