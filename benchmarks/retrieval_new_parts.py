@@ -197,7 +197,7 @@ def intrinsic_gate(args) -> None:
 
     from topomatch.stages.retrieval.catalogue import METHODS
     from topomatch.stages.retrieval.fusion import (_neighbour_sets, decide, fuse, fused_matrix, kept_scales,
-                                                   manifold_ranking, median_scale)
+                                                   manifold_ranking, median_scale, rerank_neighbours)
 
     base = METHODS["topomatch"].fusion
 
@@ -223,10 +223,9 @@ def intrinsic_gate(args) -> None:
                                     for m, labels in colls.values()), flush=True)
     def alone(m, intrinsic):
         D = fuse([m[p] for p in intrinsic], [median_scale(m[p]) for p in intrinsic])
-        return manifold_ranking(D, decide([m[p] for p in base.parts], base).rerank_k, base.rerank_alpha,
-                                base.rerank_normalisation)
+        return manifold_ranking(D, rerank_neighbours(base, len(D)), base.rerank_alpha, base.rerank_normalisation)
 
-    for intrinsic in {v[0] for v in variants}:
+    for intrinsic in dict.fromkeys(v[0] for v in variants):  # in the order of the variants
         print(f"{'+'.join(intrinsic)} alone | " + " | ".join(
             "%.3f / %.3f" % nn_map(alone(m, intrinsic), labels) for m, labels in colls.values()))
     for intrinsic, tau, soft, pair in variants:

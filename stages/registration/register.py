@@ -55,8 +55,8 @@ class Registration:
     ``level`` (k,), ``theta`` (k, p), ``value``, ``step``, ``blocked``; ``initial``: where the schedule started;
     ``overlap``: fraction of the finest level's fixed samples inside the moving image at the result; ``restarts``:
     runs of the schedule adopted after the first (a capture retry); ``measures``: what each self-check test measured,
-    flagged or not (``chance``: the measure over its chance level; ``consistency``: the largest relative drop of a
-    coarser level's measure; ``agreement``: the distance to JT's optimum; ``content``, ``prominence``, ``flatness``)."""
+    flagged or not (``chance``: the measure over its chance level; ``consistency``: a coarser level's largest relative
+    drop; ``agreement``: the distance to a second measure's optimum; ``content``, ``prominence``, ``flatness``)."""
 
     transform: RigidTransform
     value: float
@@ -483,21 +483,21 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     (``check.mi_agreement``, twelfth round). Not asked on outline-only pairs, whose measure is already of order 1."""
     m, c = run.params.metric, run.params.check
     thesis = m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"
-    limit = c.mi_agreement if thesis else c.agreement
+    key = "mi_" * thesis + "agreement"
+    limit = getattr(c, key)
     if limit <= 0 or run.outline_measure:
         return []
     name, second = ("mutual information", "mi") if thesis else ("Jensen-Tsallis (alpha 2, the thesis's measure)", "jt")
     finest = run.levels[-1]
     other = Objective(finest.objective.histogram, second, alpha=2.0, weights="histogram", min_overlap=m.min_overlap)
-    # JT's climb has a stream of its own: the checks after it draw as before, so the test only flags
-    rng = np.random.default_rng(run.params.seed + 104729) if thesis else None
+    rng = np.random.default_rng(run.params.seed + 104729) if thesis else None  # JT's own: later checks draw as before
     end = run.optimize(len(run.levels) - 1, finest.spec, theta, lower=run.lower, upper=run.upper, objective=other,
                        rng=rng).theta
     run.measures["agreement"] = run.distance(end, theta) if other(end) > other(theta) else 0.0
     if run.measures["agreement"] <= limit:
         return []
     return [Flag("agreement", f"the optimum of {name} is {run.distance(end, theta):.2f} units from the result of "
-                              f"{m.label()} (agreement {limit:g}): this measure's optimum is biased on these images")]
+                              f"{m.label()} ({key} {limit:g}): this measure's optimum is biased on these images")]
 
 
 def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
@@ -567,9 +567,9 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     flat = [f"the {key.partition('_')[2]} image {OUTLINE_TESTS[test][1].format(value)}; min_{test} {limit:g})"
             for key, value, test, limit in below]
     roles = sorted({key.partition("_")[2] for key, *_ in below})  # the outline-only image(s): fixed, moving
-    at, other = run.at(theta), {"fixed": "moving", "moving": "fixed"}
-    views = [(outline_in_view(getattr(run, r), *((getattr(run, other[r]), at if r == "fixed" else at.inverse())
-                                                if c.outline_view_partner else ())), r) for r in roles]
+    at = run.at(theta)  # each role's partner image and the map of its points into it (check.outline_view_partner)
+    partner = {"fixed": (run.moving, at), "moving": (run.fixed, at.inverse())} if c.outline_view_partner else {}
+    views = [(outline_in_view(getattr(run, r), *partner.get(r, ())), r) for r in roles]
     view, role = min(((v, r) for v, r in views if math.isfinite(v)), default=(1.0, None))
     if role is not None:
         run.measures["outline_view"] = view

@@ -80,10 +80,10 @@ def outline_in_view(image: Image, other: Image | None = None, transform=None) ->
     inside, cut = 0.0, sum(face[a] * np.count_nonzero(np.take(obj, [0, -1], axis=a)) for a in range(obj.ndim))
     for a in range(obj.ndim):
         faces = np.argwhere(np.diff(obj, axis=a)).astype(np.float64)
-        faces[:, a] += 0.5
-        seen = len(faces) if other is None else int(np.count_nonzero(np.all(np.abs(other.continuous_index(
-            transform.apply(image.physical(faces[:, ::-1]))) - (np.asarray(other.size) - 1) / 2)
-            <= np.asarray(other.size) / 2, axis=1)))
+        faces[:, a] += 0.5  # array indices of the face centres, half-way between their two pixels
+        index = None if other is None else other.continuous_index(transform.apply(image.physical(faces[:, ::-1])))
+        seen = len(faces) if index is None else int(np.count_nonzero(  # centres on the other grid's pixels
+            np.all((index >= -0.5) & (index <= np.asarray(other.size) - 0.5), axis=1)))
         inside, cut = inside + face[a] * seen, cut + face[a] * (len(faces) - seen)
     return float(inside / (inside + cut)) if inside + cut > 0 else float("nan")
 
