@@ -147,7 +147,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   measured at order 1), the design of ``final10``, fresh seeds 16xxx, run once: the numbers this project reported until
   the fourteenth round.
 - ``final12``: declared before the fourteenth round's tune-side run (the outline in view counts what the other image
-  sees at the result), the design of ``final11``, fresh seeds 17xxx, run once: the numbers this project reports now.
+  sees at the result), the design of ``final11``, fresh seeds 17xxx, run once: the numbers this project reported until
+  the fifteenth round.
+- ``final13``: declared before the fifteenth round's tune-side run (the outline-only pairs' flag and its false alarms),
+  the design of ``final12``, fresh seeds 18xxx, run once.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -236,6 +239,8 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                 2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final12": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                 2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final13": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -266,6 +271,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final11": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
                      "silhouette_resampled", "labels_resampled"),
          "final12": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
+                     "silhouette_resampled", "labels_resampled"),
+         "final13": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
                      "silhouette_resampled", "labels_resampled"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
@@ -325,6 +332,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final12", "mni", 3): 17103, ("final12", "mni15", 3): 17703, ("final12", "kmeans", 3): 17203,
          ("final12", "anatomical", 3): 17303, ("final12", "mni-axial", 2): 17102, ("final12", "mni-coronal", 2): 17402,
          ("final12", "mni-sagittal", 2): 17502, ("final12", "itk", 2): 17602,
+         ("final13", "mni", 3): 18103, ("final13", "mni15", 3): 18703, ("final13", "kmeans", 3): 18203,
+         ("final13", "anatomical", 3): 18303, ("final13", "mni-axial", 2): 18102, ("final13", "mni-coronal", 2): 18402,
+         ("final13", "mni-sagittal", 2): 18502, ("final13", "itk", 2): 18602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -338,7 +348,8 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "holdout": 5, "final": 6, "final2": 7,
                "final3": 8, "final4": 9,
                "final5": 10, "final6": 11, "final7": 12,
-               "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17}
+               "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
+               "final13": 18}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -585,7 +596,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
     tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
-                      "final8", "final9", "final10", "final11", "final12", "edge", "tight", "blur",
+                      "final8", "final9", "final10", "final11", "final12", "final13", "edge", "tight", "blur",
                       "turn")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
