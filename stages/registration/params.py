@@ -280,7 +280,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "start": {"steps": 2, "iterations": 40},
         "bounds": {"max_angle": 45.0},
         "coarse_overlap_power": 1.0,
-        "check": {"grid": 5, "min_content": 0.0, "min_prominence": 0.0, "min_flatness": 0.0, "overlap_bound": False,
+        "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
                   "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
                   "outline_view_partner": False},
     },
