@@ -60,6 +60,10 @@ SOURCES_3D = ("KmeansTest_T1RawSkullStrip.nii.gz",)
 BUNDLED_2D = ("BrainT1Slice.png", "BrainProtonDensitySlice.png")
 """``--sources bundled``: the two ITK slices the project ships (``data/images/itk``), which the corpus draws from; the
 hand probes of 2026-12-05 (a silhouette against a cropped partner) were made from them."""
+VOLUMES_3D = ("example4d.nii.gz",)
+"""``--sources volumes`` (fifteenth round): 3D only, from nibabel's own test data (installed with nibabel, never drawn by
+the corpus): ``example4d.nii.gz``'s first frame, an EPI slab of 128 x 96 x 24 voxels of 2 x 2 x 2.2 mm (a functional
+image: low contrast, 53 mm of the head in z)."""
 KINDS = ("same", "labels", "silhouette0", "silhouette1", "silhouette2")
 DISCRETE_KINDS = ("threshold", "posterized")
 ALL_KINDS = KINDS + DISCRETE_KINDS
@@ -111,15 +115,35 @@ def random_truth(rng: np.random.Generator, image: Image) -> RigidTransform:
     return RigidTransform((*angles, *rng.uniform(-15, 15, image.dim)), tuple(image.center))
 
 
-def cases(seeds: int, kinds: tuple[str, ...] = KINDS, frame: str = "full", sources: str = "examples"):
+def first_volume(path: Path) -> Image:
+    """The first 3D frame of a NIfTI file (the file itself when it is 3D), read as the registration reads it."""
+    import nibabel
+
+    image = nibabel.load(str(path))
+    if image.ndim == 3:
+        return read_image(path)
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / path.name
+        nibabel.save(nibabel.Nifti1Image(np.asarray(image.dataobj[..., 0], dtype=np.float32), image.affine), str(out))
+        return read_image(out)
+
+
+def cases(seeds: int, kinds: tuple[str, ...] = KINDS, frame: str = "full", sources: str = "examples",
+          dims: tuple[int, ...] = (2, 3)):
     """(id, fixed, moving, truth, kind) for every source, kind and seed (``frame``: module docstring)."""
     folder = data_root() / "images" / "itk_examples_data" if data_root() else None
     if sources == "bundled":
         folder = corpus.ITK_DIR
+    elif sources == "volumes":
+        import nibabel.testing
+
+        folder = Path(nibabel.testing.data_path)
     elif folder is None or not folder.is_dir():
         raise SystemExit("set TOPOMATCH_DATA_ROOT to the shared data (images/itk_examples_data)")
-    for name in BUNDLED_2D if sources == "bundled" else SOURCES_2D + SOURCES_3D:
-        source = read_image(folder / name)
+    names = {"bundled": BUNDLED_2D, "volumes": VOLUMES_3D}.get(sources, SOURCES_2D + SOURCES_3D)
+    names = [n for n in names if (3 if n in SOURCES_3D + VOLUMES_3D else 2) in dims]
+    for name in names:
+        source = first_volume(folder / name) if sources == "volumes" else read_image(folder / name)
         for kind in kinds:
             base = source if kind in DISCRETE_KINDS else moving_source(source, kind)
             for seed in range(seeds):
@@ -147,8 +171,10 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--metrics", default="jt,mi")
     ap.add_argument("--kinds", default=",".join(KINDS), help=f"any of {', '.join(ALL_KINDS)}")
     ap.add_argument("--frame", choices=("full", "tight", "partner"), default="full")
-    ap.add_argument("--sources", choices=("examples", "bundled"), default="examples",
-                    help="the ITK example images of the data root (never drawn by the corpus), or the two bundled slices")
+    ap.add_argument("--sources", choices=("examples", "bundled", "volumes"), default="examples",
+                    help="the ITK example images of the data root (never drawn by the corpus), the two bundled slices, "
+                         "or nibabel's EPI volume (3D only, never drawn by the corpus)")
+    ap.add_argument("--dims", default="2,3", help="the sources of these dimensions only")
     ap.add_argument("--params", default="", help="JSON overrides of the register parameters (a counterfactual)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
@@ -163,7 +189,8 @@ def main(argv: list[str] | None = None) -> None:
         runners["elastix"] = corpus.run_elastix
     rows, counts = [], collections.Counter()
     with tempfile.TemporaryDirectory() as tmp:
-        for cid, fixed, moving, truth, kind in cases(args.seeds, kinds, args.frame, args.sources):
+        for cid, fixed, moving, truth, kind in cases(args.seeds, kinds, args.frame, args.sources,
+                                                      tuple(int(d) for d in args.dims.split(","))):
             fixed_path, moving_path = Path(tmp) / f"{cid}_fixed.nii.gz", Path(tmp) / f"{cid}_moving.nii.gz"
             corpus.write_image(fixed, fixed_path)
             corpus.write_image(moving, moving_path)
@@ -183,7 +210,7 @@ def main(argv: list[str] | None = None) -> None:
             print(" | ".join(line), flush=True)
     summary = {f"{dim}D {kind} {method}": "/".join(str(counts[(dim, kind, method, v)]) for v in ("ok", "FF", "fw",
                                                                                                   "silent"))
-               for dim in (2, 3) for kind in kinds for method in runners}
+               for dim in sorted({row["dim"] for row in rows}) for kind in kinds for method in runners}
     print("ok / FF / fw / silent")
     for key, value in summary.items():
         print(f"  {key:28s} {value}")

@@ -590,14 +590,14 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
-    """The result does not stand out of the coarse search's landscape."""
-    if not run.params.check.search:
+    """The result does not stand out of the coarse search's landscape (outline-only pairs: check.outline_prominence)."""
+    if not (c := run.params.check).search:
         return []
     prominence = run.measures["prominence"] = run.grid().prominence(run.search_images().score(theta, min_overlap=0.0))
-    if prominence < run.params.check.min_prominence:
+    if prominence < c.min_prominence and (c.outline_prominence or not run.outline_only):
         return [Flag("prominence", f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
                                    f"deviations above a typical transform of a coarse search (min_prominence "
-                                   f"{run.params.check.min_prominence:g}); the images may share too little content")]
+                                   f"{c.min_prominence:g}); the images may share too little content")]
     return []
 
 
@@ -629,8 +629,7 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     (adopted with ``check.retry``) or, when they find none, by :meth:`_Run.shortlisted`, adopted only on a pair
     measured at order 1 (outline-only or discrete; thirteenth round): on a mask read as an image, adopting a basin
     the grid ranked low added silent errors (tenth round)."""
-    c = run.params.check
-    if not c.search:
+    if not (c := run.params.check).search:
         return []
     probes = run.candidates(theta)
     flags = _better_basin(run, theta, value, probes, adopt=True)

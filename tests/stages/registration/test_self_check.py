@@ -20,7 +20,9 @@ from topomatch.stages.registration.io import read_image
 from topomatch.stages.registration.misalign import make_case, moved
 from topomatch.stages.registration.params import RegisterParams
 from topomatch.stages.registration.register import register
-from topomatch.stages.registration.search import SearchImages, batch_jensen_tsallis2, directions, flatness, grid_search
+from topomatch.stages.registration.search import (GridSearch, SearchImages, batch_jensen_tsallis2, directions, flatness,
+                                                  grid_search)
+from topomatch.stages.registration.structure import object_mask
 from topomatch.stages.registration.transform import RigidTransform, target_registration_error
 
 ANATOMICAL = "images/nibabel_testdata/anatomical.nii"
@@ -173,6 +175,27 @@ def test_3d_unrelated_content_is_flagged(small_t1, seed):
     noise = small_t1.with_data(np.random.default_rng(seed).normal(size=small_t1.shape))
     reg = register(small_t1, noise)
     assert not reg.ok and "chance level" in reg.reason, reg.summary()
+
+
+def test_a_3d_result_that_does_not_stand_out_of_the_coarse_search_is_flagged_only(small_t1, monkeypatch):
+    """Fifteenth round: the prominence test flags in 3D too, at 2D's threshold, on pairs that are not outline-only. A
+    known transform is recovered; with the coarse search's landscape made to rank the result 3 MADs above its median
+    (below ``min_prominence``, above 0: the value that never flagged in 3D before), the same transform comes back,
+    flagged; the same moving image as a silhouette (an outline-only pair) is not judged by it in 3D."""
+    truth = RigidTransform((0.05, -0.03, 0.08, 3.0, -2.0, 1.5), small_t1.center)
+    moving = moved(small_t1, truth)
+    plain = register(small_t1, moving)
+    assert plain.ok and plain.measures["prominence"] >= RegisterParams().check.min_prominence, plain.summary()
+    monkeypatch.setattr(GridSearch, "prominence", lambda self, value: 3.0)
+    flagged = register(small_t1, moving)
+    assert [f.check for f in flagged.flags] == ["prominence"] and flagged.measures["prominence"] == 3.0
+    np.testing.assert_array_equal(flagged.transform.parameters, plain.transform.parameters)
+    assert _tre(small_t1, flagged, truth) < 0.5
+    silhouette = moving.with_data(np.where(object_mask(moving), 100.0, 0.0)
+                                  + np.random.default_rng(0).normal(0.0, 2.0, moving.shape))
+    outline = register(small_t1, silhouette)  # an outline-only pair: its coarse landscape is broad, not judged in 3D
+    assert outline.measures["prominence"] == 3.0 and "prominence" not in {f.check for f in outline.flags}
+    assert "outline_gap" in outline.measures, outline.measures  # read as outline-only: check_outline measured it
 
 
 def test_a_level_whose_steps_run_out_runs_again_until_it_settles(small_t1):
