@@ -152,7 +152,8 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final13``: declared before the fifteenth round's tune-side run (the prominence test in 3D), the design of
   ``final12``, fresh seeds 18xxx, run once: the numbers this project reported until the sixteenth round.
 - ``final14``: declared before the sixteenth round's tune-side run (``optimizer.average_last`` 10: each level's result
-  the mean of its last 10 iterates), the design of ``final13``, fresh seeds 19xxx, run once.
+  the mean of its last 10 iterates), the design of ``final13``, fresh seeds 19xxx; the round failed on the tune side,
+  so it was run once with the fifteenth round's code: a second fresh measure of that release.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
