@@ -154,6 +154,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final14``: declared before the sixteenth round's tune-side run (``optimizer.average_last`` 10: each level's result
   the mean of its last 10 iterates), the design of ``final13``, fresh seeds 19xxx; the round failed on the tune side,
   so it was run once with the fifteenth round's code: a second fresh measure of that release.
+- ``final15``: declared before the seventeenth round's tune-side run (``optimizer.average_finest`` 10: the finest
+  level's result the mean of its last 10 iterates, on pairs not measured as outlines), the design of ``final14``,
+  fresh seeds 20xxx, run once.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -246,6 +249,8 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                 2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final14": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                 2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
+    "final15": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -280,6 +285,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final13": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
                      "silhouette_resampled", "labels_resampled"),
          "final14": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
+                     "silhouette_resampled", "labels_resampled"),
+         "final15": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma",
                      "silhouette_resampled", "labels_resampled"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
@@ -345,6 +352,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final14", "mni", 3): 19103, ("final14", "mni15", 3): 19703, ("final14", "kmeans", 3): 19203,
          ("final14", "anatomical", 3): 19303, ("final14", "mni-axial", 2): 19102, ("final14", "mni-coronal", 2): 19402,
          ("final14", "mni-sagittal", 2): 19502, ("final14", "itk", 2): 19602,
+         ("final15", "mni", 3): 20103, ("final15", "mni15", 3): 20703, ("final15", "kmeans", 3): 20203,
+         ("final15", "anatomical", 3): 20303, ("final15", "mni-axial", 2): 20102, ("final15", "mni-coronal", 2): 20402,
+         ("final15", "mni-sagittal", 2): 20502, ("final15", "itk", 2): 20602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -359,7 +369,8 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final3": 8, "final4": 9,
                "final5": 10, "final6": 11, "final7": 12,
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
-               "final13": 18, "final14": 19}
+               "final13": 18, "final14": 19,
+               "final15": 20}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -606,7 +617,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
     tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
-                      "final8", "final9", "final10", "final11", "final12", "final13", "final14", "edge", "tight", "blur",
+                      "final8", "final9", "final10", "final11", "final12", "final13", "final14", "final15", "edge", "tight", "blur",
                       "turn")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))

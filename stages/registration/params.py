@@ -82,6 +82,7 @@ class OptimizerSpec(_Named):
                                                                             "is blocked")
     tol: float = Field(0.0, ge=0, description="stop a level when `window` steps are shorter (physical units)")
     average_last: int = Field(1, ge=1, description="result of a level = mean of its last iterates")
+    average_finest: int = Field(1, ge=1, description="the finest level's average_last (pairs not measured as outlines)")
 
 
 class LevelSpec(Params):

@@ -287,11 +287,12 @@ class _Run:
         continued from iteration ``start``; SPSA's perturbations from the run's stream, or ``rng``)."""
         o = self.params.optimizer
         objective = self.levels[li].objective if objective is None else objective
+        last = o.average_finest if li == len(self.levels) - 1 and not self.outline_measure else o.average_last
         if o.name == "spsa":
             settings = SPSASettings(
                 iterations=spec.iterations, a=o.a, A=o.A, c=spec.c, alpha=spec.gain_alpha, gamma=o.gain_gamma,
                 step=spec.step, average=spec.average, max_step=o.max_step, blocking=o.blocking, shrink=o.shrink,
-                tol=o.tol, average_last=min(o.average_last, spec.iterations), newton=o.newton, normalize=o.normalize,
+                tol=o.tol, average_last=min(last, spec.iterations), newton=o.newton, normalize=o.normalize,
                 c_step_ratio=o.c_step_ratio, start=start)
             return spsa_maximize(objective, theta, settings, rng=self.rng if rng is None else rng, scales=self.scales,
                                  lower=lower, upper=upper, callback=callback)
@@ -484,8 +485,7 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     m, c = run.params.metric, run.params.check
     thesis = m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"
     key = "mi_" * thesis + "agreement"
-    limit = getattr(c, key)
-    if limit <= 0 or run.outline_measure:
+    if (limit := getattr(c, key)) <= 0 or run.outline_measure:
         return []
     name, second = ("mutual information", "mi") if thesis else ("Jensen-Tsallis (alpha 2, the thesis's measure)", "jt")
     finest = run.levels[-1]
@@ -543,13 +543,12 @@ def check_overlap_bound(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_content(run: _Run, theta, value, stop) -> list[Flag]:
     """Too little of the fixed image's content lands on the moving image's content."""
-    if not run.params.check.search:
+    if not (c := run.params.check).search:
         return []
     content = run.measures["content"] = run.search_images().content_overlap(theta)
-    if content < run.params.check.min_content:
-        return [Flag("content", f"only {content:.1%} of the fixed image's content (Otsu foreground) lands on the "
-                                f"moving image's content at the result (min_content "
-                                f"{run.params.check.min_content:.0%}): too little shared content to trust it")]
+    if content < c.min_content:
+        return [Flag("content", f"only {content:.1%} of the fixed content (Otsu foreground) lands on the moving image's"
+                                f" content at the result (min_content {c.min_content:.0%}): too little shared content")]
     return []
 
 
