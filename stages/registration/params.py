@@ -82,7 +82,7 @@ class OptimizerSpec(_Named):
                                                                             "is blocked")
     tol: float = Field(0.0, ge=0, description="stop a level when `window` steps are shorter (physical units)")
     average_last: int = Field(1, ge=1, description="result of a level = mean of its last iterates")
-    average_finest: int = Field(1, ge=1, description="the finest level's average_last (pairs not measured as outlines)")
+    average_finest: int = Field(10, ge=1, description="the finest level's average_last (pairs not measured as outlines)")
 
 
 class LevelSpec(Params):
@@ -279,7 +279,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "schedule": [_level(8.0, 16, 150, 4.0, 4.0, "parzen", 4000), _level(4.0, 24, 60, 1.0, 2.0, "parzen", 8000),
                      _level(2.0, 64, 40, 0.3, 1.0, "parzen", 30000, average=2, gain_alpha=1.0, settle=0.2,
                             reruns=2)],
-        "start": {"steps": 2, "iterations": 40},
+        "start": {"steps": 2, "iterations": 40}, "optimizer": {"average_finest": 1},
         "bounds": {"max_angle": 45.0},
         "coarse_overlap_power": 1.0,
         "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
