@@ -198,6 +198,23 @@ def test_a_3d_result_that_does_not_stand_out_of_the_coarse_search_is_flagged_onl
     assert "outline_gap" in outline.measures, outline.measures  # read as outline-only: check_outline measured it
 
 
+def test_finest_level_averaging_moves_only_pairs_measured_as_images(pd_slice):
+    """Seventeenth round: ``optimizer.average_finest`` (2D default 10) averages the finest level's last iterates of a
+    pair measured as an image, which still recovers a known transform; an outline-only pair (a silhouette) is measured
+    as an outline and its result is bit-identical whatever the option says."""
+    truth = RigidTransform.euler2d(6.0, -4.0, 8.0, pd_slice.center)
+    moving = moved(pd_slice, truth)
+    assert RegisterParams().optimizer.average_finest == 10
+    one, ten = (register(pd_slice, moving, RegisterParams(optimizer={"average_finest": n})) for n in (1, 10))
+    assert not np.array_equal(one.transform.parameters, ten.transform.parameters)
+    assert ten.ok and _tre(pd_slice, ten, truth) < 0.2, ten.summary()
+    silhouette = moving.with_data(np.where(object_mask(moving), 100.0, 0.0)
+                                  + np.random.default_rng(0).normal(0.0, 2.0, moving.shape))
+    one, ten = (register(pd_slice, silhouette, RegisterParams(optimizer={"average_finest": n})) for n in (1, 10))
+    assert "outline_gap" in ten.measures  # measured as an outline
+    np.testing.assert_array_equal(one.transform.parameters, ten.transform.parameters)
+
+
 def test_a_level_whose_steps_run_out_runs_again_until_it_settles(small_t1):
     """A misalignment longer than one run of a level's decaying steps can travel: with ``settle``/``reruns`` the
     level runs again from its end and gets closer to the known transform."""
