@@ -24,21 +24,11 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from topomatch.stages.registration.image import grow
+from topomatch.stages.registration.image import border, grow
 from topomatch.stages.registration.interpolation import resample
 from topomatch.stages.registration.io import read_image
 from topomatch.stages.registration.structure import object_mask
 from topomatch.stages.registration.transform import RigidTransform
-
-
-def border_pixels(shape: tuple[int, ...]) -> np.ndarray:
-    out = np.zeros(shape, dtype=bool)
-    for axis in range(len(shape)):
-        index = [slice(None)] * len(shape)
-        for end in (0, -1):
-            index[axis] = end
-            out[tuple(index)] = True
-    return out
 
 
 def outline_fit(fixed, moving, transform: RigidTransform) -> dict:
@@ -52,7 +42,7 @@ def outline_fit(fixed, moving, transform: RigidTransform) -> dict:
               - ndimage.distance_transform_edt(moving_object, sampling=spacing))
     own = (ndimage.distance_transform_edt(~fixed_object, sampling=spacing)
            - ndimage.distance_transform_edt(fixed_object, sampling=spacing))
-    used = fixed_object & grow(~fixed_object, 1.0) & ~grow(undefined | border_pixels(fixed_object.shape), 3.0)
+    used = fixed_object & grow(~fixed_object, 1.0) & ~grow(undefined | border(fixed_object.shape), 3.0)
     if used.sum() < 20:
         return {"n": int(used.sum())}
     normal = np.stack([g[used] for g in np.gradient(ndimage.gaussian_filter(own, 1.0), *spacing)], axis=1)
