@@ -68,12 +68,11 @@ static void *accumulate(void *arg) {
             continue;
         }
         double a0 = m[c[0]] + fx * (m[c[1]] - m[c[0]]);
-        const double a1 = m[c[2]] + fx * (m[c[3]] - m[c[2]]);
-        double a2 = m[c[4]] + fx * (m[c[5]] - m[c[4]]);
-        const double a3 = m[c[6]] + fx * (m[c[7]] - m[c[6]]);
-        a0 += fy * (a1 - a0);
-        a2 += fy * (a3 - a2);
-        a0 += fz * (a2 - a0);
+        a0 += fy * (m[c[2]] + fx * (m[c[3]] - m[c[2]]) - a0);
+        if (dk) {  /* one slice (a 2D image): its corners 4-7 are 0-3 and fz is 0, which leave a0 as it is */
+            const double a2 = m[c[4]] + fx * (m[c[5]] - m[c[4]]);
+            a0 += fz * (a2 + fy * (m[c[6]] + fx * (m[c[7]] - m[c[6]]) - a2) - a0);
+        }
         if (t->mode == 0) {
             long bin = (long)(a0 + 0.5);
             g0[cell0 + (bin < 0 ? 0 : (bin > bmax ? bmax : bin))] += 1.0;

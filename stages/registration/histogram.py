@@ -110,7 +110,7 @@ class JointHistogram:
         self._inv = np.linalg.inv(moving.index_matrix)
         self._size = tuple(moving.size) + (1,) * (3 - self.dim)
         self._mflat = np.ascontiguousarray((moving.data.ravel() - moving_binning.lo) * moving_binning.scale - 0.5)
-        self._mbins = np.ascontiguousarray(moving_binning.index(moving.data).ravel(), dtype=np.int64)
+        self._mbins = (moving_binning.index(moving.data).ravel() if mode == "pv" else np.zeros(1)).astype(np.int64)
         self._bmax = moving_binning.bins - 1
         self.threads = histogram_threads() if self.n_samples >= PARALLEL_SAMPLES else 1
 

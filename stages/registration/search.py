@@ -66,7 +66,7 @@ class SearchImages:
         if len(flat) > SEARCH_SAMPLES:
             flat = np.sort(np.random.default_rng(0).choice(flat, SEARCH_SAMPLES, replace=False))
         self._P = (fixed_small.points(flat) - self.center).T  # (d, n)
-        self._fbk = fb.index(fixed_small.data.ravel()[flat]) * mb.bins
+        self._fbk = (fb.index(fixed_small.data.ravel()[flat]) * mb.bins).astype(np.int32)  # int32: half the traffic
         self.n_samples = self._P.shape[1]
         self._fixed_content = foreground_mask(fixed_small).ravel()[flat]
         self._inv = np.linalg.inv(self.moving_small.index_matrix)
@@ -83,7 +83,7 @@ class SearchImages:
         if pad <= self._pad:
             return
         inner = tuple(slice(pad, pad + n) for n in self._moving_bins_small.shape)
-        bins = np.full([n + 2 * pad for n in self._moving_bins_small.shape], self.K, dtype=np.intp)
+        bins = np.full([n + 2 * pad for n in self._moving_bins_small.shape], self.K, dtype=np.int32)
         bins[inner] = self._moving_bins_small
         content = np.zeros(bins.shape, dtype=bool)
         content[inner] = self._moving_content
@@ -101,15 +101,16 @@ class SearchImages:
         need = max(0, int((-low).max()), int(high.max()))
         self._canvas(need)
         base = ((U + self._pad) * self._strides[:, None]).sum(axis=0)
-        return base[None, :] + (steps @ self._strides)[:, None]
+        return base.astype(np.int32)[None, :] + (steps @ self._strides).astype(np.int32)[:, None]
 
     def scores_and_overlaps(self, theta: np.ndarray, steps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """JT of order 2 (NaN without samples inside) and the fraction of the samples inside, (b,) each."""
         K, b = self.K, len(steps)
         cells = self._cells(np.asarray(theta, dtype=np.float64), np.asarray(steps, dtype=np.intp))
-        idx = self._fbk[None, :] + self._bins_canvas[cells]
+        idx = self._bins_canvas.take(cells)  # int32 and in place: the 2D search 1.4x faster than intp (same counts)
+        idx += self._fbk
         np.minimum(idx, K, out=idx)  # outside samples: the extra cell K of each row
-        idx += (K + 1) * np.arange(b)[:, None]
+        idx += ((K + 1) * np.arange(b, dtype=np.int32))[:, None]
         h = np.bincount(idx.ravel(), minlength=(K + 1) * b).reshape(b, K + 1)[:, :K]
         h = h.reshape(b, -1, self._moving_bins).astype(np.float64)
         return batch_jensen_tsallis2(h), h.sum(axis=(1, 2)) / self.n_samples
