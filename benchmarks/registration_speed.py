@@ -17,6 +17,11 @@ Per pair, interleaved so that every method meets the same machine load:
 
 The goals (docs/registration.md): 3D, the median of ours at most elastix's in-process median; 2D, ours at most
 the SimpleITK script's.
+
+``--baseline CHECKOUT`` (another tree of the project, e.g. ``git worktree add /tmp/old REV``) adds **ours, baseline**:
+the same command run from that tree's code (its compiled pass built in place, its package laid out as the editable
+install lays out this one, put first on ``PYTHONPATH``), interleaved with ours on every pair, and the median of the
+per-pair ratios ours / baseline: what a change did to the time a user waits, measured in one run.
 """
 
 from __future__ import annotations
@@ -51,10 +56,25 @@ print(r.Execute(f, m).GetParameters())
 USER_ENV = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
 
 
-def process_seconds(cmd: list[str]) -> float:
+def process_seconds(cmd: list[str], env: dict[str, str] = USER_ENV) -> float:
     t = time.perf_counter()
-    subprocess.run(cmd, capture_output=True, text=True, env=USER_ENV)  # a flagged result exits 1: still timed
+    # a flagged result exits 1: still timed; run away from any checkout, whose topomatch/ folder `-m` would import
+    subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=tempfile.gettempdir())
     return time.perf_counter() - t
+
+
+def baseline_env(checkout: Path, folder: Path) -> dict[str, str]:
+    """The environment that runs ``topomatch`` from ``checkout``'s code: its compiled pass built in place, and a
+    ``topomatch`` package of links to its folders (the editable install's layout) first on ``PYTHONPATH``."""
+    subprocess.run([sys.executable, "setup.py", "build_ext", "--inplace"], cwd=checkout, check=True,
+                   capture_output=True)
+    package = folder / "baseline" / "topomatch"
+    package.mkdir(parents=True)
+    for item in (checkout / "topomatch").iterdir():
+        (package / item.name).symlink_to(item)
+    for name in ("configs", "data", "pipeline", "stages"):
+        (package / name).symlink_to(checkout / name)
+    return dict(USER_ENV, PYTHONPATH=str(package.parent))
 
 
 def elastix_seconds(fixed, moving) -> float:
@@ -70,6 +90,8 @@ def main() -> None:
     ap.add_argument("--cases", type=int, default=20, help="pairs per dimension (default 20)")
     ap.add_argument("--dims", default="3,2")
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--baseline", type=Path, default=None, metavar="CHECKOUT",
+                    help="another tree of the project, timed beside ours (module docstring)")
     args = ap.parse_args()
     out: dict = {"machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
                              "load_average_at_start": list(os.getloadavg())}, "dims": {}}
@@ -77,6 +99,7 @@ def main() -> None:
     script = folder / "sitk_register.py"
     script.write_text(SITK_SCRIPT)
     ours_cmd = [sys.executable, "-m", "topomatch", "register"]
+    baseline = baseline_env(args.baseline.resolve(), folder) if args.baseline else None
     for dim in (int(d) for d in args.dims.split(",")):
         specs = [s for s in corpus.plan_split("report", dim) if corpus.source_available(s.source)][: args.cases]
         pairs = [corpus.write_case(corpus.build_case(s), folder) for s in specs]
@@ -86,8 +109,16 @@ def main() -> None:
         rows = {"ours (process)": [], "elastix (in process)": []}
         if dim == 2:
             rows["SimpleITK script (process)"] = []
-        for (fixed_path, moving_path, fixed, moving), spec in zip(pairs, specs):
-            rows["ours (process)"].append(process_seconds(ours_cmd + [str(fixed_path), str(moving_path), "--json"]))
+        if baseline:
+            rows["ours, baseline (process)"] = []
+            process_seconds(ours_cmd + [str(fixed_path), str(moving_path), "--json"], baseline)
+        for i, ((fixed_path, moving_path, fixed, moving), spec) in enumerate(zip(pairs, specs)):
+            command = ours_cmd + [str(fixed_path), str(moving_path), "--json"]
+            if baseline and i % 2:  # every other pair the baseline first: neither always meets a warmer machine
+                rows["ours, baseline (process)"].append(process_seconds(command, baseline))
+            rows["ours (process)"].append(process_seconds(command))
+            if baseline and not i % 2:
+                rows["ours, baseline (process)"].append(process_seconds(command, baseline))
             rows["elastix (in process)"].append(elastix_seconds(fixed, moving))
             if dim == 2:
                 rows["SimpleITK script (process)"].append(
@@ -96,6 +127,10 @@ def main() -> None:
         result = {k: summary(v) for k, v in rows.items()}
         reference = "elastix (in process)" if dim == 3 else "SimpleITK script (process)"
         result["ratio_ours_over_reference"] = result["ours (process)"]["median"] / result[reference]["median"]
+        if baseline:
+            result["median_pair_ratio_ours_over_baseline"] = statistics.median(
+                a / b for a, b in zip(rows["ours (process)"], rows["ours, baseline (process)"]))
+            print(f"== {dim}D: ours / baseline, median over pairs {result['median_pair_ratio_ours_over_baseline']:.3f}")
         out["dims"][f"{dim}D"] = {"summary": result, "seconds": rows, "reference": reference}
         print(f"== {dim}D: median ours {result['ours (process)']['median']:.3f} s, {reference} "
               f"{result[reference]['median']:.3f} s, ratio {result['ratio_ours_over_reference']:.2f}", flush=True)
