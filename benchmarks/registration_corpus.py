@@ -157,6 +157,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final15``: declared before the seventeenth round's tune-side run (``optimizer.average_finest`` 10: the finest
   level's result the mean of its last 10 iterates, on pairs not measured as outlines), the design of ``final14``,
   fresh seeds 20xxx, run once.
+- ``final16``: declared on 2026-12-05 (evening) after the search in int32 (no result changed) and before any tune-side
+  run of an eighteenth round (the finest 2D level's settings, probed for the median TRE), the design of ``final15``,
+  fresh seeds 21xxx, run once: with the eighteenth round's code if one is adopted, else with this release's (a second
+  fresh measure of it, as ``final14`` was).
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -249,6 +253,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
     "final13": FINAL_DESIGN,
     "final14": FINAL_DESIGN,
     "final15": FINAL_DESIGN,
+    "final16": FINAL_DESIGN,
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -278,6 +283,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final13": ELEVEN_KINDS,
          "final14": ELEVEN_KINDS,
          "final15": ELEVEN_KINDS,
+         "final16": ELEVEN_KINDS,
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -345,6 +351,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final15", "mni", 3): 20103, ("final15", "mni15", 3): 20703, ("final15", "kmeans", 3): 20203,
          ("final15", "anatomical", 3): 20303, ("final15", "mni-axial", 2): 20102, ("final15", "mni-coronal", 2): 20402,
          ("final15", "mni-sagittal", 2): 20502, ("final15", "itk", 2): 20602,
+         ("final16", "mni", 3): 21103, ("final16", "mni15", 3): 21703, ("final16", "kmeans", 3): 21203,
+         ("final16", "anatomical", 3): 21303, ("final16", "mni-axial", 2): 21102, ("final16", "mni-coronal", 2): 21402,
+         ("final16", "mni-sagittal", 2): 21502, ("final16", "itk", 2): 21602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -360,7 +369,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final5": 10, "final6": 11, "final7": 12,
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
-               "final15": 20}
+               "final15": 20, "final16": 21}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -607,7 +616,8 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
     tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
-                      "final8", "final9", "final10", "final11", "final12", "final13", "final14", "final15", "edge", "tight", "blur",
+                      "final8", "final9", "final10", "final11", "final12", "final13", "final14", "final15", "final16", "edge",
+                      "tight", "blur",
                       "turn")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
