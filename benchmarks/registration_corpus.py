@@ -167,6 +167,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final18``: declared before the twentieth round's tune-side run (the start from each image's content centroid,
   ``transform.init: content``, instead of the intensity centroid of the whole frame), the design of ``final17``,
   fresh seeds 23xxx, run once.
+- ``final19``: declared before the twenty-first round's tune-side run (the coarse search sampling the fixed content
+  grown by ``sampling.margin`` instead of its whole copy, ``check.search_region: content``), the design of
+  ``final18``, fresh seeds 24xxx, run once.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -262,6 +265,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
     "final16": FINAL_DESIGN,
     "final17": FINAL_DESIGN,
     "final18": FINAL_DESIGN,
+    "final19": FINAL_DESIGN,
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -294,6 +298,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final16": ELEVEN_KINDS,
          "final17": ELEVEN_KINDS,
          "final18": ELEVEN_KINDS,
+         "final19": ELEVEN_KINDS,
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -370,6 +375,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final18", "mni", 3): 23103, ("final18", "mni15", 3): 23703, ("final18", "kmeans", 3): 23203,
          ("final18", "anatomical", 3): 23303, ("final18", "mni-axial", 2): 23102, ("final18", "mni-coronal", 2): 23402,
          ("final18", "mni-sagittal", 2): 23502, ("final18", "itk", 2): 23602,
+         ("final19", "mni", 3): 24103, ("final19", "mni15", 3): 24703, ("final19", "kmeans", 3): 24203,
+         ("final19", "anatomical", 3): 24303, ("final19", "mni-axial", 2): 24102, ("final19", "mni-coronal", 2): 24402,
+         ("final19", "mni-sagittal", 2): 24502, ("final19", "itk", 2): 24602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -385,7 +393,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final5": 10, "final6": 11, "final7": 12,
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
-               "final15": 20, "final16": 21, "final17": 22, "final18": 23}
+               "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -633,7 +641,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
     tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
                       "final8", "final9", "final10", "final11", "final12", "final13", "final14", "final15", "final16", "final17", "final18",
-                      "edge",
+                      "final19", "edge",
                       "tight", "blur",
                       "turn")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
