@@ -253,19 +253,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    "final7": FINAL_DESIGN,
-    "final8": FINAL_DESIGN,
-    "final9": FINAL_DESIGN,
-    "final10": FINAL_DESIGN,
-    "final11": FINAL_DESIGN,
-    "final12": FINAL_DESIGN,
-    "final13": FINAL_DESIGN,
-    "final14": FINAL_DESIGN,
-    "final15": FINAL_DESIGN,
-    "final16": FINAL_DESIGN,
-    "final17": FINAL_DESIGN,
-    "final18": FINAL_DESIGN,
-    "final19": FINAL_DESIGN,
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 20)},  # final7 to final19: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -287,18 +275,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         "final8": ELEVEN_KINDS,
-         "final9": ELEVEN_KINDS,
-         "final10": ELEVEN_KINDS,
-         "final11": ELEVEN_KINDS,
-         "final12": ELEVEN_KINDS,
-         "final13": ELEVEN_KINDS,
-         "final14": ELEVEN_KINDS,
-         "final15": ELEVEN_KINDS,
-         "final16": ELEVEN_KINDS,
-         "final17": ELEVEN_KINDS,
-         "final18": ELEVEN_KINDS,
-         "final19": ELEVEN_KINDS,
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 20)},  # final8 to final19
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -639,11 +616,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     jitter = tuple(float(v) for v in rng.uniform(0.9, 1.1, size=3))
     dilation = int(rng.integers(0, 4))
     threshold_percentile, saturation_percentile = float(rng.uniform(20, 80)), float(rng.uniform(5, 20))
-    tight = split in ("confirm", "holdout", "final", "final2", "final3", "final4", "final5", "final6", "final7",
-                      "final8", "final9", "final10", "final11", "final12", "final13", "final14", "final15", "final16", "final17", "final18",
-                      "final19", "edge",
-                      "tight", "blur",
-                      "turn")
+    tight = split.startswith("final") or split in ("confirm", "holdout", "edge", "tight", "blur", "turn")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
     if split == "tight":  # every section tightly cropped (the same draws otherwise)

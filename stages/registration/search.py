@@ -107,7 +107,7 @@ class SearchImages:
         """JT of order 2 (NaN without samples inside) and the fraction of the samples inside, (b,) each."""
         K, b = self.K, len(steps)
         cells = self._cells(np.asarray(theta, dtype=np.float64), np.asarray(steps, dtype=np.intp))
-        idx = self._bins_canvas.take(cells)  # int32 and in place: the 2D search 1.4x faster than intp (same counts)
+        idx = self._bins_canvas.take(cells)  # int32 and in place: the 2D search 50 -> 40 ms (same counts)
         idx += self._fbk
         np.minimum(idx, K, out=idx)  # outside samples: the extra cell K of each row
         idx += ((K + 1) * np.arange(b, dtype=np.int32))[:, None]
