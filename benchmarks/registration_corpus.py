@@ -170,6 +170,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final19``: declared before the twenty-first round's tune-side run (the coarse search sampling the fixed content
   grown by ``sampling.margin`` instead of its whole copy, ``check.search_region: content``), the design of
   ``final18``, fresh seeds 24xxx, run once.
+- ``final20``: declared before the twenty-second round's tune-side run (a flag-only probe: the 3D start search's end
+  as one more capture probe for 2D pairs read as images; after ``registration_probability_attack.py``'s tight-frame
+  split left a white-matter probability map 64 px off, unflagged), the design of ``final19``, fresh seeds 25xxx,
+  run once.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -253,7 +257,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 20)},  # final7 to final19: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 21)},  # final7 to final20: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -275,7 +279,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 20)},  # final8 to final19
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 21)},  # final8 to final20
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -355,6 +359,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final19", "mni", 3): 24103, ("final19", "mni15", 3): 24703, ("final19", "kmeans", 3): 24203,
          ("final19", "anatomical", 3): 24303, ("final19", "mni-axial", 2): 24102, ("final19", "mni-coronal", 2): 24402,
          ("final19", "mni-sagittal", 2): 24502, ("final19", "itk", 2): 24602,
+         ("final20", "mni", 3): 25103, ("final20", "mni15", 3): 25703, ("final20", "kmeans", 3): 25203,
+         ("final20", "anatomical", 3): 25303, ("final20", "mni-axial", 2): 25102, ("final20", "mni-coronal", 2): 25402,
+         ("final20", "mni-sagittal", 2): 25502, ("final20", "itk", 2): 25602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -370,7 +377,8 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final5": 10, "final6": 11, "final7": 12,
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
-               "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24}
+               "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
+               "final20": 25}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12

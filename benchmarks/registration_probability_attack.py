@@ -1,0 +1,101 @@
+"""An attack on the self-check with a kind of moving image the corpus never drew and no threshold was tuned on:
+**tissue probability maps** (what a segmentation tool such as SPM or FAST writes, and what users register to a T1),
+and a **soft brain mask** (a mask smoothed by a Gaussian, as a template's brain-probability map is), registered as a
+user does (``topomatch.register(fixed_path, moving_path, metric=m)``, defaults, from files), elastix beside it.
+
+The cases are the validation corpus's (``registration_corpus.py``: its MNI152 2009a sources, its draws of rigid
+transforms, sections, frames, crops and thick slices) in a split of their own, ``probability`` (seeds 27xxx, drawn by
+no other script), whose moving kinds are made here and added to the corpus's kinds for this run only:
+
+- ``gm_probability``, ``wm_probability``: the grey- or white-matter fraction map of the MNI template (values 0-1,
+  smooth, no noise, no bias field: a probability map has neither);
+- ``soft_mask``: the brain mask smoothed by a Gaussian of 2 voxels (outline-only, with a ramp instead of an edge);
+- ``t1``: the control (the corpus's T1 with its noise and bias).
+
+A third of the probability and soft-mask cases are swapped (the map is the fixed image, the moved T1 the moving one),
+as the corpus swaps its label maps and silhouettes. ``--split probability-tight`` (2D, seeds 27x12): the same kinds,
+every section cut to a window of 45-60 % of each axis at a random place (the corpus's tight frame: the object fills
+the grid, where the outline tests judge least). Correct = mean TRE <= 1 pixel (2D) / 1 mm (3D); counts per kind:
+ok / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
+
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_probability_attack.py \\
+        --json benchmarks/results/registration_probability_attack.json
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws, methods and scoring)
+
+SPLIT, TIGHT = "probability", "probability-tight"
+KINDS = ("gm_probability", "wm_probability", "soft_mask", "t1")
+SOFT_MASK_SIGMA = 2.0
+"""Voxels: the Gaussian that makes the soft brain mask."""
+SOURCES = {3: [("mni", 20), ("mni15", 10)], 2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20)]}
+SEEDS = {("mni", 3): 27103, ("mni15", 3): 27703, ("mni-axial", 2): 27102, ("mni-coronal", 2): 27402,
+         ("mni-sagittal", 2): 27502}
+TIGHT_SEEDS = {("mni-axial", 2): 27112, ("mni-coronal", 2): 27412, ("mni-sagittal", 2): 27512}
+
+
+def kind_probability(tissue: str):
+    def make(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+        return np.clip(f.maps[tissue], 0.0, 1.0)
+    make.__doc__ = f"The {tissue.upper()} fraction map (0-1), as it is: no noise, no bias field."
+    return make
+
+
+def kind_soft_mask(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """The brain mask smoothed by a Gaussian of :data:`SOFT_MASK_SIGMA` voxels (no noise)."""
+    return ndimage.gaussian_filter((f.maps["mask"] > 0.5).astype(np.float64), SOFT_MASK_SIGMA)
+
+
+def register_split() -> None:
+    """Add the split and its kinds to the corpus module (this process only)."""
+    corpus.KIND_MAKERS.update({"gm_probability": kind_probability("gm"), "wm_probability": kind_probability("wm"),
+                               "soft_mask": kind_soft_mask})
+    corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:3]
+    corpus.SPLITS.update({SPLIT: SOURCES, TIGHT: {2: SOURCES[2]}})
+    corpus.KINDS.update({SPLIT: KINDS, TIGHT: KINDS})
+    corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
+    corpus.SEEDS.update({(TIGHT, source, dim): seed for (source, dim), seed in TIGHT_SEEDS.items()})
+    corpus.SPLIT_ORDER.update({SPLIT: max(corpus.SPLIT_ORDER.values()) + 100, TIGHT: max(corpus.SPLIT_ORDER.values()) + 101})
+    plan = corpus.plan_case
+
+    def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
+        spec = plan(split, source, dim, index, place)
+        if split != TIGHT:
+            return spec
+        u = np.random.default_rng([spec.seed, index, 7]).uniform(size=4)  # the corpus's tight window: 45-60 %
+        section = {"position": spec.section["position"], "spacing": spec.section["spacing"], "frame": "tight",
+                   "crop_fractions": [float(v) for v in 0.45 + 0.15 * u[:2]], "crop_starts": [float(v) for v in u[2:]]}
+        return dataclasses.replace(spec, section=section)
+
+    corpus.plan_case = plan_case
+    needed = corpus.maps_needed
+
+    def maps_needed(kind: str, f: corpus.Fields) -> set[str]:
+        extra = {"gm_probability": {"gm"}, "wm_probability": {"wm"}, "soft_mask": {"mask"}}
+        return extra[kind] | {"t1"} if kind in extra else needed(kind, f)
+
+    corpus.maps_needed = maps_needed
+
+
+def main() -> None:
+    """The corpus's command line (``registration_corpus.py --help``) on this split; its defaults here: JT and MI,
+    ours and elastix."""
+    register_split()
+    argv = sys.argv[1:]
+    defaults = {"--metrics": "jt,mi", "--methods": "ours,elastix"}
+    split = [] if "--split" in argv else ["--split", SPLIT]
+    corpus.main(split + [x for k, v in defaults.items() if k not in argv for x in (k, v)] + argv)
+
+
+if __name__ == "__main__":
+    main()
