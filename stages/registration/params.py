@@ -225,6 +225,8 @@ class CheckSpec(Params):
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
     shortlist: int = Field(10, ge=0, description="when the candidates find no better basin, the best of this many "
                            "grid transforms by the first level's measure are probed; a winner only flags (0: off)")
+    start_search: bool = Field(True, description="when no start search ran (start.steps 0: 2D), the 3D start search's "
+                               "end is one more probe of a pair read as an image; a winner only flags")
     refine: int = Field(20, ge=0, description="coarsest-level iterations from each probe before the comparison")
     retry: bool = Field(True, description="when a probe wins, adopt the result of the schedule run from it and check "
                                           "again (once)")

@@ -20,7 +20,7 @@ from topomatch.pipeline.contract import StageError, StageResult, stage
 from topomatch.stages.registration.histogram import Binning, JointHistogram
 from topomatch.stages.registration.image import Image, foreground_mask, gaussian_blur, grow, rms_radius
 from topomatch.stages.registration.objective import Objective
-from topomatch.stages.registration.params import LevelSpec, RegisterParams, for_dimension
+from topomatch.stages.registration.params import DIMENSION_DEFAULTS, LevelSpec, RegisterParams, StartSpec, for_dimension
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
@@ -240,13 +240,13 @@ class _Run:
                               center=self.center, mode=spec.interpolation, samples=samples, mask=mask,
                               jitter=self.params.sampling.jitter, seed=seed)
 
-    def start_search(self, t_init: np.ndarray) -> np.ndarray:
-        """The start: ``transform.init``'s translation, or with ``start.steps`` the best of a grid of
+    def start_search(self, t_init: np.ndarray, st: StartSpec | None = None) -> np.ndarray:
+        """The start: ``transform.init``'s translation, or with ``start.steps`` (or ``st``'s) the best of a grid of
         ``(2 steps + 1)^d`` shifts of ``start.spacing`` about it, the other centre-mapping translation and the
         identity (the files' own placement), scored at the coarsest level; each centre and the
         ``start.candidates`` best shifts are then optimised ``start.iterations`` coarsest-level iterations and
         the highest end is the start (a cropped or re-contrasted moving image moves its centroid)."""
-        st, zeros = self.params.start, np.zeros(self.k)
+        st, zeros = st or self.params.start, np.zeros(self.k)
         theta0 = np.r_[zeros, t_init]
         if st.steps == 0:
             return theta0
@@ -627,15 +627,24 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     """Another basin is better (:func:`_better_basin`), found by the grid's ``check.candidates`` best transforms
     (adopted with ``check.retry``) or, when they find none, by :meth:`_Run.shortlisted`, adopted only on a pair
     measured at order 1 (outline-only or discrete; thirteenth round): on a mask read as an image, adopting a basin
-    the grid ranked low added silent errors (tenth round)."""
+    the grid ranked low added silent errors (tenth round). Last, on a pair read as an image that no start search
+    began (``check.start_search``, twenty-second round), the 3D start search's end: a winner only flags; it draws
+    from a stream of its own and leaves no history, so the estimate is as without it."""
     if not (c := run.params.check).search:
         return []
     probes = run.candidates(theta)
     flags = _better_basin(run, theta, value, probes, adopt=True)
-    if flags or c.shortlist <= c.candidates:
+    if not flags and c.shortlist > c.candidates:
+        more = [p for p in run.shortlisted(theta) if not any(np.array_equal(p, q) for q in probes)]
+        flags = _better_basin(run, theta, value, more, adopt=run.outline_measure)
+    if flags or run.outline_measure or run.params.start.steps or not c.start_search:
         return flags
-    more = [p for p in run.shortlisted(theta) if not any(np.array_equal(p, q) for q in probes)]
-    return _better_basin(run, theta, value, more, adopt=run.outline_measure)
+    rng, n, run.rng = run.rng, len(run.history), np.random.default_rng(run.params.seed + 104729)
+    probe = run.start_search(run.start[run.k:], StartSpec(**DIMENSION_DEFAULTS[3]["start"]))
+    flags = _better_basin(run, theta, value, [probe], adopt=False)
+    run.rng = rng
+    del run.history[n:]
+    return flags
 
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
@@ -670,8 +679,8 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
     if not confirmed:
         return []
     kind = ("the registration stopped in a local optimum; the misalignment is probably outside the capture range"
-            if adopt else "a basin the coarse grid ranked low (check.shortlist), not adopted: such basins are as "
-            "often wrong where the measure cannot be trusted (a mask read as an image); check the overlay")
+            if adopt else "a basin the coarse grid ranked low (check.shortlist, start_search), not adopted: such "
+            "basins are as often wrong where the measure cannot be trusted (a mask read as an image); check the overlay")
     return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result "
                             f"({best_value:.4g} > {here:.4g} at the {levels[0].spacing:g}-unit level) {where}: {kind}")]
 

@@ -326,4 +326,26 @@ def test_shortlisted_probes_are_adopted_only_on_a_pair_measured_at_order_one(pd_
     monkeypatch.setattr(reg_module, "_better_basin", spy)
     source = pd_slice.with_data(np.where(object_mask(pd_slice), 100.0, 0.0)) if outline else pd_slice
     reg = register(pd_slice, _moved(source, 3.0, -4.0, 10.0))
-    assert reg.ok and calls == [(True, outline), (outline, outline)], (reg.reason, calls)
+    start_search = [] if outline else [(False, False)]  # the twenty-second round's probe: structured pairs only
+    assert reg.ok and calls == [(True, outline), (outline, outline)] + start_search, (reg.reason, calls)
+
+
+def test_a_basin_only_the_start_search_finds_flags_and_leaves_the_estimate_as_it_was(pd_slice, monkeypatch):
+    """Twenty-second round (``check.start_search``): a 2D pair read as an image, started 78 px from the truth with
+    the grid's probes taken away, ends in a wrong basin; the 3D start search's end finds the true one, which flags
+    ``capture`` naming it and is not adopted: parameters, iterations and the other flags are those of the probe
+    off, bit for bit (its stream and history are its own)."""
+    from topomatch.stages.registration import register as reg_module
+
+    real = reg_module._Run.start_search
+    monkeypatch.setattr(reg_module._Run, "candidates", lambda self, theta, n=None: [])
+    monkeypatch.setattr(reg_module._Run, "start_search", lambda self, t_init, st=None: real(self, t_init, st)
+                        if st is not None else np.r_[0.0, np.asarray(t_init) + (60.0, 50.0)])
+    moving = _moved(pd_slice, 8.0, -6.0, 0.0)
+    off = register(pd_slice, moving, RegisterParams(check={"start_search": False}))
+    on = register(pd_slice, moving)
+    truth = RigidTransform.euler2d(8.0, -6.0, 0.0, pd_slice.center)
+    assert _tre(pd_slice, off, truth) > 50 and "capture" not in [f.check for f in off.flags]
+    assert [f.check for f in on.flags] == [f.check for f in off.flags] + ["capture"] and "start_search" in on.reason
+    np.testing.assert_array_equal(on.transform.parameters, off.transform.parameters)
+    assert on.iterations == off.iterations and on.restarts == off.restarts == 0
