@@ -15,11 +15,14 @@ no other script), whose moving kinds are made here and added to the corpus's kin
 A third of the probability and soft-mask cases are swapped (the map is the fixed image, the moved T1 the moving one),
 as the corpus swaps its label maps and silhouettes. ``--split probability-tight`` (2D, seeds 27x12): the same kinds,
 every section cut to a window of 45-60 % of each axis at a random place (the corpus's tight frame: the object fills
-the grid, where the outline tests judge least). ``probability-tight-2`` (seeds 28x12): the same design, declared once the
-twenty-second round's rule had passed on the tune side (``probability-tight`` had been looked at), run once with its code.
+the grid, where the outline tests judge least). ``probability-tight-2`` (seeds 28x12): the same design, declared once
+the twenty-second round's rule had passed on the tune side (``probability-tight`` had been looked at), run once with
+its code.
 ``probability-box`` (3D, seeds 29x03; the corpus has no tight 3D frame): the same kinds, fixed and moving volume cut to
-one box of 55-70 % of each axis at a random place (the same voxels of both grids: no thick slices, no slab crop here). Correct = mean TRE <= 1 pixel (2D) / 1 mm (3D); counts per kind:
-ok / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
+one box of 55-70 % of each axis at a random place (the same voxels of both grids: no thick slices, no slab crop here).
+``outline-box`` (3D, seeds 30x03): the same box with the corpus's own outline kinds (silhouette, label map, thresholded
+and saturated volumes) and the T1: the issue's headline class in a frame the corpus never draws. Correct = mean TRE
+<= 1 pixel (2D) / 1 mm (3D); counts per kind: ok / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_probability_attack.py \\
         --json benchmarks/results/registration_probability_attack.json
@@ -42,8 +45,9 @@ from topomatch.stages.registration.misalign import crop_slab  # noqa: E402
 SPLIT = "probability"
 TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012}
 """The tight-frame splits and their seeds' base (+100 axial, +400 coronal, +500 sagittal sections)."""
-BOX = "probability-box"
 KINDS = ("gm_probability", "wm_probability", "soft_mask", "t1")
+BOX = {"probability-box": KINDS, "outline-box": ("silhouette", "labels", "threshold", "saturated", "t1")}
+"""The 3D box splits and their kinds."""
 SOFT_MASK_SIGMA = 2.0
 """Voxels: the Gaussian that makes the soft brain mask."""
 SOURCES = {3: [("mni", 20), ("mni15", 10)], 2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20)]}
@@ -68,19 +72,20 @@ def register_split() -> None:
     corpus.KIND_MAKERS.update({"gm_probability": kind_probability("gm"), "wm_probability": kind_probability("wm"),
                                "soft_mask": kind_soft_mask})
     corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:3]
-    corpus.SPLITS.update({SPLIT: SOURCES, **{tight: {2: SOURCES[2]} for tight in TIGHT}, BOX: {3: SOURCES[3]}})
-    corpus.KINDS.update({split: KINDS for split in (SPLIT, *TIGHT, BOX)})
-    corpus.SEEDS.update({(BOX, "mni", 3): 29103, (BOX, "mni15", 3): 29703})
+    corpus.SPLITS.update({SPLIT: SOURCES, **{t: {2: SOURCES[2]} for t in TIGHT}, **{b: {3: SOURCES[3]} for b in BOX}})
+    corpus.KINDS.update({split: KINDS for split in (SPLIT, *TIGHT)} | BOX)
+    corpus.SEEDS.update({("probability-box", "mni", 3): 29103, ("probability-box", "mni15", 3): 29703,
+                         ("outline-box", "mni", 3): 30103, ("outline-box", "mni15", 3): 30703})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
     corpus.SEEDS.update({(tight, f"mni-{plane}", 2): base + offset for tight, base in TIGHT.items()
                          for plane, offset in (("axial", 100), ("coronal", 400), ("sagittal", 500))})
     last = max(corpus.SPLIT_ORDER.values())
-    corpus.SPLIT_ORDER.update({split: last + 100 + i for i, split in enumerate((SPLIT, *TIGHT, BOX))})
+    corpus.SPLIT_ORDER.update({split: last + 100 + i for i, split in enumerate((SPLIT, *TIGHT, *BOX))})
     plan = corpus.plan_case
 
     def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
         spec = plan(split, source, dim, index, place)
-        if split == BOX:
+        if split in BOX:
             return dataclasses.replace(spec, thick=False, crop=None)
         if split not in TIGHT:
             return spec
@@ -94,7 +99,7 @@ def register_split() -> None:
 
     def build_case(spec: corpus.CaseSpec) -> corpus.Case:
         case = build(spec)
-        if spec.split != BOX:
+        if spec.split not in BOX:
             return case
         u = np.random.default_rng([spec.seed, spec.index, 9]).uniform(size=6)
         fixed, moving = case.fixed, case.moving
