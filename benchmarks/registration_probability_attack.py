@@ -46,8 +46,9 @@ SPLIT = "probability"
 TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012}
 """The tight-frame splits and their seeds' base (+100 axial, +400 coronal, +500 sagittal sections)."""
 KINDS = ("gm_probability", "wm_probability", "soft_mask", "t1")
-BOX = {"probability-box": KINDS, "outline-box": ("silhouette", "labels", "threshold", "saturated", "t1")}
-"""The 3D box splits and their kinds."""
+BOX = {"probability-box": (KINDS, 29003),
+       "outline-box": (("silhouette", "labels", "threshold", "saturated", "t1"), 30003)}
+"""The 3D box splits: their kinds and their seeds' base (+100 the 2 mm volumes, +700 the 1.5 mm ones)."""
 SOFT_MASK_SIGMA = 2.0
 """Voxels: the Gaussian that makes the soft brain mask."""
 SOURCES = {3: [("mni", 20), ("mni15", 10)], 2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20)]}
@@ -68,15 +69,18 @@ def kind_soft_mask(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade)
 
 
 def register_split() -> None:
-    """Add the split and its kinds to the corpus module (this process only)."""
+    """Add the splits and their kinds to the corpus module (this process only; once: the wrappers below would
+    otherwise crop a box twice)."""
+    if SPLIT in corpus.SPLITS:
+        return
     corpus.KIND_MAKERS.update({"gm_probability": kind_probability("gm"), "wm_probability": kind_probability("wm"),
                                "soft_mask": kind_soft_mask})
     corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:3]
     corpus.SPLITS.update({SPLIT: SOURCES, **{t: {2: SOURCES[2]} for t in TIGHT}, **{b: {3: SOURCES[3]} for b in BOX}})
-    corpus.KINDS.update({split: KINDS for split in (SPLIT, *TIGHT)} | BOX)
-    corpus.SEEDS.update({("probability-box", "mni", 3): 29103, ("probability-box", "mni15", 3): 29703,
-                         ("outline-box", "mni", 3): 30103, ("outline-box", "mni15", 3): 30703})
+    corpus.KINDS.update({split: KINDS for split in (SPLIT, *TIGHT)} | {box: kinds for box, (kinds, _) in BOX.items()})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
+    corpus.SEEDS.update({(box, source, 3): base + offset for box, (_, base) in BOX.items()
+                         for source, offset in (("mni", 100), ("mni15", 700))})
     corpus.SEEDS.update({(tight, f"mni-{plane}", 2): base + offset for tight, base in TIGHT.items()
                          for plane, offset in (("axial", 100), ("coronal", 400), ("sagittal", 500))})
     last = max(corpus.SPLIT_ORDER.values())
