@@ -174,6 +174,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   as one more capture probe for 2D pairs read as images; after ``registration_probability_attack.py``'s tight-frame
   split left a white-matter probability map 64 px off, unflagged), the design of ``final19``, fresh seeds 25xxx,
   run once.
+- ``final21``: declared before the twenty-third round's tune-side run (an image at its exact minimum or maximum on
+  at least half its pixels, a soft mask, has a two-class residual of 0; after the attack's ``probability-tight-2``
+  left a soft mask read as an image 16.9 mm off, unflagged), the design of ``final20``, fresh seeds 26xxx, run once.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -257,7 +260,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 21)},  # final7 to final20: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 22)},  # final7 to final21: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -279,7 +282,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 21)},  # final8 to final20
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 22)},  # final8 to final21
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -362,6 +365,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final20", "mni", 3): 25103, ("final20", "mni15", 3): 25703, ("final20", "kmeans", 3): 25203,
          ("final20", "anatomical", 3): 25303, ("final20", "mni-axial", 2): 25102, ("final20", "mni-coronal", 2): 25402,
          ("final20", "mni-sagittal", 2): 25502, ("final20", "itk", 2): 25602,
+         ("final21", "mni", 3): 26103, ("final21", "mni15", 3): 26703, ("final21", "kmeans", 3): 26203,
+         ("final21", "anatomical", 3): 26303, ("final21", "mni-axial", 2): 26102, ("final21", "mni-coronal", 2): 26402,
+         ("final21", "mni-sagittal", 2): 26502, ("final21", "itk", 2): 26602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -378,7 +384,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25}
+               "final20": 25, "final21": 26}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12

@@ -17,9 +17,12 @@ as the corpus swaps its label maps and silhouettes. ``--split probability-tight`
 every section cut to a window of 45-60 % of each axis at a random place (the corpus's tight frame: the object fills
 the grid, where the outline tests judge least). ``probability-tight-2`` (seeds 28x12): the same design, declared once
 the twenty-second round's rule had passed on the tune side (``probability-tight`` had been looked at), run once with
-its code.
+its code. ``probability-tight-3`` (seeds 31x12): the same design again, declared with the twenty-third round's rule
+(soft masks, which ``probability-tight`` and ``probability-tight-2`` showed and which are seen now), run once with
+the round's code, adopted or not.
 ``probability-box`` (3D, seeds 29x03; the corpus has no tight 3D frame): the same kinds, fixed and moving volume cut to
 one box of 55-70 % of each axis at a random place (the same voxels of both grids: no thick slices, no slab crop here).
+``probability-box-2`` (seeds 32x03): the same design, declared with the twenty-third round's rule, run once.
 ``outline-box`` (3D, seeds 30x03): the same box with the corpus's own outline kinds (silhouette, label map, thresholded
 and saturated volumes) and the T1: the issue's headline class in a frame the corpus never draws. Correct = mean TRE
 <= 1 pixel (2D) / 1 mm (3D); counts per kind: ok / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
@@ -43,10 +46,10 @@ import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws
 from topomatch.stages.registration.misalign import crop_slab  # noqa: E402
 
 SPLIT = "probability"
-TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012}
+TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012, "probability-tight-3": 31012}
 """The tight-frame splits and their seeds' base (+100 axial, +400 coronal, +500 sagittal sections)."""
 KINDS = ("gm_probability", "wm_probability", "soft_mask", "t1")
-BOX = {"probability-box": (KINDS, 29003),
+BOX = {"probability-box": (KINDS, 29003), "probability-box-2": (KINDS, 32003),
        "outline-box": (("silhouette", "labels", "threshold", "saturated", "t1"), 30003)}
 """The 3D box splits: their kinds and their seeds' base (+100 the 2 mm volumes, +700 the 1.5 mm ones)."""
 SOFT_MASK_SIGMA = 2.0
