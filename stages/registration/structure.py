@@ -11,6 +11,7 @@ import numpy as np
 
 from topomatch.stages.registration.image import Image, border, foreground_mask, gaussian_blur, grow, otsu_threshold
 from topomatch.stages.registration.interpolation import resample
+from topomatch.stages.registration.params import MetricSpec
 from topomatch.stages.registration.transform import RigidTransform
 
 CLOSING = 2.0
@@ -24,6 +25,11 @@ SOLID = 0.9
 image, with dark regions inside its object, is not)."""
 GAP_BAND = 4.0
 """:func:`outline_gap` compares the objects within this many pixels of the fixed outline."""
+PLATEAU = 0.5
+""":func:`two_class_residual` of an image at its exact minimum or maximum on at least this fraction of its pixels, with
+more distinct intensities than a label map (``metric.discrete_levels``' default), is 0: two plateaus and a ramp
+between (a soft mask), not an inside (twenty-third round)."""
+RAMP_LEVELS = MetricSpec.model_fields["discrete_levels"].default
 
 
 def fill_holes(mask: np.ndarray) -> np.ndarray:
@@ -144,16 +150,19 @@ def two_class_residual(image: Image) -> float:
     whatever fraction of the grid it fills (2 % noise: 4e-4), an image with an inside far more (brain sections
     >= 0.004 on the corpus). Judged only where :func:`interior_structure` and :func:`interior_spread` cannot (both
     NaN: an object that fills the grid, a tight field of view; both are kept on the image, so asking them again
-    costs nothing); NaN elsewhere. (Dividing by the total variance instead made a silhouette filling 99 % of the
-    grid read as structure: its total variance is little more than the noise.)"""
+    costs nothing); NaN elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`). (Dividing by the total
+    variance instead made a silhouette filling 99 % of the grid read as structure: its total variance is little more
+    than the noise.)"""
     if not (np.isnan(interior_structure(image)) and np.isnan(interior_spread(image))):
         return float("nan")
     data = image.data.ravel()
     upper = data > otsu_threshold(image.data)
-    if upper.all() or not upper.any():
+    if upper.all() or not upper.any() or (contrast := data[upper].mean() - data[~upper].mean()) <= 0:
         return float("nan")
-    contrast = data[upper].mean() - data[~upper].mean()
-    return float(max(data[upper].var(), data[~upper].var()) / contrast ** 2) if contrast > 0 else float("nan")
+    extreme = (data <= data.min() + 1e-6 * contrast) | (data >= data.max() - 1e-6 * contrast)
+    if np.mean(extreme) >= PLATEAU and distinct_levels(image, RAMP_LEVELS) > RAMP_LEVELS:
+        return 0.0  # two plateaus and a ramp between: a soft mask
+    return float(max(data[upper].var(), data[~upper].var()) / contrast ** 2)
 
 
 def outline_gap(fixed: Image, moving: Image, transform: RigidTransform) -> float:

@@ -291,6 +291,61 @@ def test_two_class_residual_of_a_grid_filling_two_level_image_is_its_noise(d):
     assert np.isnan(two_class_residual(Image(ball.astype(np.float64))))
 
 
+def _class_ratio(data: np.ndarray) -> float:
+    """The two Otsu classes' worse variance over their squared contrast (the residual without the plateau rule)."""
+    from topomatch.stages.registration.image import otsu_threshold
+
+    upper = data > otsu_threshold(data)
+    return max(data[upper].var(), data[~upper].var()) / (data[upper].mean() - data[~upper].mean()) ** 2
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_an_image_mostly_at_its_two_extremes_with_a_ramp_between_has_no_residual(d):
+    """Twenty-third round. A grid-filling image by the distance from a corner (an object with no outline to judge):
+    the nearest 20 % of the pixels at 0, then a ramp of distinct values, the rest at 1. With the ramp over 40 % of
+    the pixels (60 % at 0 or 1) the residual is 0 (two plateaus and a ramp: a soft mask); over 60 % (40 % at the
+    extremes), or with the ramp at four label values (a label map, no ramp), it is the classes' variance ratio,
+    computed here from its definition."""
+    from topomatch.stages.registration.structure import two_class_residual
+
+    shape = (60, 70) if d == 2 else (30, 34, 38)
+    distance = np.sqrt((np.indices(shape, dtype=np.float64) ** 2).sum(axis=0))
+    rank = np.argsort(np.argsort(distance, axis=None, kind="stable")).reshape(shape) / distance.size  # in [0, 1)
+
+    def image(ramp: float, levels: int = 0) -> np.ndarray:
+        r = (rank - 0.2) / ramp
+        r = np.round(r * levels) / levels if levels else r
+        return np.where(rank < 0.2, 0.0, np.where(rank < 0.2 + ramp, r, 1.0))
+
+    for data, plateau in ((image(0.4), True), (image(0.6), False), (image(0.4, levels=4), False)):
+        assert np.isnan(interior_structure(Image(data))) and np.isnan(interior_spread(Image(data)))
+        expected = 0.0 if plateau else _class_ratio(data)
+        assert expected == 0.0 or expected > 0.01
+        assert two_class_residual(Image(data)) == pytest.approx(expected, rel=1e-9)
+
+
+def test_a_tight_soft_mask_is_outline_only_by_its_plateaus_and_with_noise_by_nothing(pd_slice):
+    """The tight PD crop below against its silhouette blurred by a Gaussian of 2 pixels (a soft mask, no noise): its
+    ramp gives the Otsu classes a variance ratio of ~0.018, nine times ``min_residual``, so before the twenty-third
+    round the pair was read as an image; at 0 or 1 on 83 % of its pixels, its residual is 0 and the pair outline-only.
+    With 2 % noise no pixel sits at an extreme, and the ratio (ramp and noise) reads it as an image, as before."""
+    from topomatch.stages.registration.params import RegisterParams, for_dimension
+    from topomatch.stages.registration.register import _Run
+    from topomatch.stages.registration.structure import object_mask
+
+    rows, cols = pd_slice.data.shape
+    window = (slice(0, rows // 2), slice(cols // 4, 3 * cols // 4))
+    fixed = pd_slice.with_data(pd_slice.data[window].copy())
+    soft = gaussian_blur(object_mask(pd_slice)[window].astype(np.float64), [2.0, 2.0])
+    params = for_dimension(RegisterParams(), 2)
+    assert _class_ratio(soft) > 5 * params.check.min_residual
+    run = _Run(fixed, fixed.with_data(soft), params, None, None)
+    assert run.structures["residual_moving"] == 0.0 and run.outline_only
+    noisy = soft + np.random.default_rng(0).normal(0, 0.02, soft.shape)
+    run = _Run(fixed, fixed.with_data(noisy), params, None, None)
+    assert run.structures["residual_moving"] > params.check.min_residual and not run.outline_only
+
+
 def test_a_tight_silhouette_is_outline_only_by_its_residual_and_the_test_can_be_turned_off(pd_slice):
     """The PD slice cropped to its upper middle (the head fills the grid) against the silhouette of that crop, 2 %
     noise: structure and spread cannot judge the silhouette (NaN), its two-class residual (~1e-3) makes the pair
