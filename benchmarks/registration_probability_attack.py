@@ -20,6 +20,9 @@ the twenty-second round's rule had passed on the tune side (``probability-tight`
 its code. ``probability-tight-3`` (seeds 31x12): the same design again, declared with the twenty-third round's rule
 (soft masks, which ``probability-tight`` and ``probability-tight-2`` showed and which are seen now), run once with
 the round's code, adopted or not.
+``clean-tight`` (seeds 33x12): the same tight design with noise-free images that have exact plateaus and are not
+soft masks: the template T1 as it is (exact zeros outside the head), the same clipped at the 95th percentile of the
+head, the GM map, and the T1 control; a false-alarm attack on the twenty-third round's rule, run once after it.
 ``probability-box`` (3D, seeds 29x03; the corpus has no tight 3D frame): the same kinds, fixed and moving volume cut to
 one box of 55-70 % of each axis at a random place (the same voxels of both grids: no thick slices, no slab crop here).
 ``probability-box-2`` (seeds 32x03): the same design, declared with the twenty-third round's rule, run once.
@@ -46,9 +49,12 @@ import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws
 from topomatch.stages.registration.misalign import crop_slab  # noqa: E402
 
 SPLIT = "probability"
-TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012, "probability-tight-3": 31012}
+TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012, "probability-tight-3": 31012, "clean-tight": 33012}
 """The tight-frame splits and their seeds' base (+100 axial, +400 coronal, +500 sagittal sections)."""
 KINDS = ("gm_probability", "wm_probability", "soft_mask", "t1")
+CLEAN_KINDS = ("t1_clean", "t1_clipped", "gm_probability", "t1")
+"""``clean-tight``'s kinds: noise-free images with exact plateaus that are not soft masks (a false-alarm attack on the
+twenty-third round's rule)."""
 BOX = {"probability-box": (KINDS, 29003), "probability-box-2": (KINDS, 32003),
        "outline-box": (("silhouette", "labels", "threshold", "saturated", "t1"), 30003)}
 """The 3D box splits: their kinds and their seeds' base (+100 the 2 mm volumes, +700 the 1.5 mm ones)."""
@@ -71,16 +77,28 @@ def kind_soft_mask(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade)
     return ndimage.gaussian_filter((f.maps["mask"] > 0.5).astype(np.float64), SOFT_MASK_SIGMA)
 
 
+def kind_t1_clean(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """The template T1 as it is: no noise, no bias field (exactly 0 outside the head)."""
+    return f.maps["t1"].copy()
+
+
+def kind_t1_clipped(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """The template T1 clipped at the 95th percentile of its head, no noise (a saturated window, exact at both ends)."""
+    t1 = f.maps["t1"]
+    return np.minimum(t1, np.percentile(t1[t1 > 0], 95))
+
+
 def register_split() -> None:
     """Add the splits and their kinds to the corpus module (this process only; once: the wrappers below would
     otherwise crop a box twice)."""
     if SPLIT in corpus.SPLITS:
         return
     corpus.KIND_MAKERS.update({"gm_probability": kind_probability("gm"), "wm_probability": kind_probability("wm"),
-                               "soft_mask": kind_soft_mask})
+                               "soft_mask": kind_soft_mask, "t1_clean": kind_t1_clean, "t1_clipped": kind_t1_clipped})
     corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:3]
     corpus.SPLITS.update({SPLIT: SOURCES, **{t: {2: SOURCES[2]} for t in TIGHT}, **{b: {3: SOURCES[3]} for b in BOX}})
-    corpus.KINDS.update({split: KINDS for split in (SPLIT, *TIGHT)} | {box: kinds for box, (kinds, _) in BOX.items()})
+    corpus.KINDS.update({split: KINDS for split in (SPLIT, *TIGHT)} | {box: kinds for box, (kinds, _) in BOX.items()}
+                        | {"clean-tight": CLEAN_KINDS})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
     corpus.SEEDS.update({(box, source, 3): base + offset for box, (_, base) in BOX.items()
                          for source, offset in (("mni", 100), ("mni15", 700))})
@@ -120,7 +138,8 @@ def register_split() -> None:
     needed = corpus.maps_needed
 
     def maps_needed(kind: str, f: corpus.Fields) -> set[str]:
-        extra = {"gm_probability": {"gm"}, "wm_probability": {"wm"}, "soft_mask": {"mask"}}
+        extra = {"gm_probability": {"gm"}, "wm_probability": {"wm"}, "soft_mask": {"mask"}, "t1_clean": set(),
+                 "t1_clipped": set()}
         return extra[kind] | {"t1"} if kind in extra else needed(kind, f)
 
     corpus.maps_needed = maps_needed
