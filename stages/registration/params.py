@@ -178,8 +178,8 @@ class CheckSpec(Params):
                                 description="where neither test above can judge an image (its object fills the grid: "
                                             "a tight field of view), a pair in which the larger variance of its two "
                                             "Otsu classes is less than this fraction of their contrast squared is "
-                                            "outline-only too: a mask or silhouette with noise (structure.py; 0: this "
-                                            "test is off)")
+                                            "outline-only too: a mask or silhouette, noisy or soft (structure.py; "
+                                            "0: this test is off)")
     outline_gap: float = Field(6.0, ge=0, allow_inf_nan=False,
                                description="such a pair is flagged when the two outlines lie farther apart than this "
                                            "(physical units, mean, compared within 4 fixed pixels of the fixed "
