@@ -126,8 +126,8 @@ OUTLINE_TESTS = {
     "structure": (interior_structure, "has almost no structure inside its outline (interior gradient {:.3f} of the "
                                       "outline's"),
     "spread": (interior_spread, "is almost uniform inside its object (intensity spread {:.3f} of its contrast"),
-    "residual": (two_class_residual, "fills the grid with two intensity levels only (its two Otsu classes vary "
-                                     "by {:.4f} of their contrast squared"),
+    "residual": (two_class_residual, "fills the grid with two intensity levels only, or two exact plateaus and a "
+                                     "ramp (its Otsu classes vary by {:.4f} of their contrast squared, 0 for plateaus"),
 }
 """The outline-only tests: name -> (measure of one image, how a flag words a low value: a format string); each
 is compared with ``check.min_<name>`` and is off at 0."""

@@ -337,9 +337,9 @@ def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
             ax.set_title(f"{label}, {what}" if label else what, fontsize=8)
             ax.set_axis_off()
     flag = "" if registration.ok else "  FLAGGED: " + registration.reason[:100]
-    axes[0][0].text(0, -0.18 if len(axes) == 1 else 1.25, f"{title}  {registration.method}: "
-                    f"{describe(registration.transform)} ({registration.seconds:.2f} s){flag}",
-                    transform=axes[0][0].transAxes, fontsize=8, color="#b00" if flag else "k")
+    axes[0][0].figure.text(0, -0.18 if len(axes) == 1 else 1.25, f"{title}  {registration.method}: "  # over every panel
+                           f"{describe(registration.transform)} ({registration.seconds:.2f} s){flag}",
+                           transform=axes[0][0].transAxes, fontsize=8, color="#b00" if flag else "k")
 
 
 def overlay_figure(pairs, **margins):
