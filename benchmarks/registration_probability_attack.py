@@ -26,6 +26,8 @@ head, the GM map, and the T1 control; a false-alarm attack on the twenty-third r
 ``probability-box`` (3D, seeds 29x03; the corpus has no tight 3D frame): the same kinds, fixed and moving volume cut to
 one box of 55-70 % of each axis at a random place (the same voxels of both grids: no thick slices, no slab crop here).
 ``probability-box-2`` (seeds 32x03): the same design, declared with the twenty-third round's rule, run once.
+``probability-box-3`` (seeds 35x03): the same design, declared with the twenty-fourth round's rule (``probability-box-2``
+is seen: its GM maps' misses were read for that round), run once.
 ``outline-box`` (3D, seeds 30x03): the same box with the corpus's own outline kinds (silhouette, label map, thresholded
 and saturated volumes) and the T1: the issue's headline class in a frame the corpus never draws. Correct = mean TRE
 <= 1 pixel (2D) / 1 mm (3D); counts per kind: ok / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
@@ -55,7 +57,7 @@ KINDS = ("gm_probability", "wm_probability", "soft_mask", "t1")
 CLEAN_KINDS = ("t1_clean", "t1_clipped", "gm_probability", "t1")
 """``clean-tight``'s kinds: noise-free images with exact plateaus that are not soft masks (a false-alarm attack on the
 twenty-third round's rule)."""
-BOX = {"probability-box": (KINDS, 29003), "probability-box-2": (KINDS, 32003),
+BOX = {"probability-box": (KINDS, 29003), "probability-box-2": (KINDS, 32003), "probability-box-3": (KINDS, 35003),
        "outline-box": (("silhouette", "labels", "threshold", "saturated", "t1"), 30003)}
 """The 3D box splits: their kinds and their seeds' base (+100 the 2 mm volumes, +700 the 1.5 mm ones)."""
 SOFT_MASK_SIGMA = 2.0
