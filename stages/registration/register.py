@@ -497,7 +497,8 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     if run.measures["agreement"] <= limit:
         return []
     return [Flag("agreement", f"the optimum of {name} is {run.distance(end, theta):.2f} units from the result of "
-                              f"{m.label()} ({key} {limit:g}): this measure's optimum is biased on these images")]
+                              f"{m.label()} ({key} {limit:g}): this measure's optimum is biased on these images; "
+                              f"compare with --metric {second}")]
 
 
 def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
