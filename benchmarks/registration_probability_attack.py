@@ -23,6 +23,9 @@ the round's code, adopted or not.
 ``clean-tight`` (seeds 33x12): the same tight design with noise-free images that have exact plateaus and are not
 soft masks: the template T1 as it is (exact zeros outside the head), the same clipped at the 95th percentile of the
 head, the GM map, and the T1 control; a false-alarm attack on the twenty-third round's rule, run once after it.
+``phantom-tight`` (seeds 36x12): the same tight design with BrainWeb-style phantoms (T1-, T2- and PD-like contrasts
+from the tissue fractions, no noise, no bias field: a pure tissue is one exact value) and the T1; a second false-alarm
+attack on the twenty-third round's rule, declared and run once after it.
 ``probability-box`` (3D, seeds 29x03; the corpus has no tight 3D frame): the same kinds, fixed and moving volume cut to
 one box of 55-70 % of each axis at a random place (the same voxels of both grids: no thick slices, no slab crop here).
 ``probability-box-2`` (seeds 32x03): the same design, declared with the twenty-third round's rule, run once.
@@ -51,12 +54,18 @@ import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws
 from topomatch.stages.registration.misalign import crop_slab  # noqa: E402
 
 SPLIT = "probability"
-TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012, "probability-tight-3": 31012, "clean-tight": 33012}
+TIGHT = {"probability-tight": 27012, "probability-tight-2": 28012, "probability-tight-3": 31012, "clean-tight": 33012,
+         "phantom-tight": 36012}
 """The tight-frame splits and their seeds' base (+100 axial, +400 coronal, +500 sagittal sections)."""
 KINDS = ("gm_probability", "wm_probability", "soft_mask", "t1")
 CLEAN_KINDS = ("t1_clean", "t1_clipped", "gm_probability", "t1")
 """``clean-tight``'s kinds: noise-free images with exact plateaus that are not soft masks (a false-alarm attack on the
 twenty-third round's rule)."""
+PHANTOM_KINDS = ("t1_phantom", "t2_phantom", "pd_phantom", "t1")
+"""``phantom-tight``'s kinds: BrainWeb-style contrasts from the tissue fractions without noise or bias field (a
+phantom's pure tissue is one exact value: a plateau at the brightest tissue)."""
+T1_VALUES = (0.25, 0.6, 1.0)
+"""CSF, GM, WM of the T1 phantom (dark CSF, bright white matter); T2 and PD use the corpus's values."""
 BOX = {"probability-box": (KINDS, 29003), "probability-box-2": (KINDS, 32003), "probability-box-3": (KINDS, 35003),
        "outline-box": (("silhouette", "labels", "threshold", "saturated", "t1"), 30003)}
 """The 3D box splits: their kinds and their seeds' base (+100 the 2 mm volumes, +700 the 1.5 mm ones)."""
@@ -90,17 +99,26 @@ def kind_t1_clipped(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade
     return np.minimum(t1, np.percentile(t1[t1 > 0], 95))
 
 
+def kind_phantom(values):
+    def make(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+        return corpus._contrast(f, values, spec.contrast_jitter)
+    make.__doc__ = "A tissue-fraction contrast without noise or bias field (a phantom)."
+    return make
+
+
 def register_split() -> None:
     """Add the splits and their kinds to the corpus module (this process only; once: the wrappers below would
     otherwise crop a box twice)."""
     if SPLIT in corpus.SPLITS:
         return
     corpus.KIND_MAKERS.update({"gm_probability": kind_probability("gm"), "wm_probability": kind_probability("wm"),
-                               "soft_mask": kind_soft_mask, "t1_clean": kind_t1_clean, "t1_clipped": kind_t1_clipped})
+                               "soft_mask": kind_soft_mask, "t1_clean": kind_t1_clean, "t1_clipped": kind_t1_clipped,
+                               "t1_phantom": kind_phantom(T1_VALUES), "t2_phantom": kind_phantom(corpus.T2_VALUES),
+                               "pd_phantom": kind_phantom(corpus.PD_VALUES)})
     corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:3]
     corpus.SPLITS.update({SPLIT: SOURCES, **{t: {2: SOURCES[2]} for t in TIGHT}, **{b: {3: SOURCES[3]} for b in BOX}})
     corpus.KINDS.update({split: KINDS for split in (SPLIT, *TIGHT)} | {box: kinds for box, (kinds, _) in BOX.items()}
-                        | {"clean-tight": CLEAN_KINDS})
+                        | {"clean-tight": CLEAN_KINDS, "phantom-tight": PHANTOM_KINDS})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
     corpus.SEEDS.update({(box, source, 3): base + offset for box, (_, base) in BOX.items()
                          for source, offset in (("mni", 100), ("mni15", 700))})
@@ -141,7 +159,7 @@ def register_split() -> None:
 
     def maps_needed(kind: str, f: corpus.Fields) -> set[str]:
         extra = {"gm_probability": {"gm"}, "wm_probability": {"wm"}, "soft_mask": {"mask"}, "t1_clean": set(),
-                 "t1_clipped": set()}
+                 "t1_clipped": set(), **{f"{c}_phantom": {"gm", "wm", "csf"} for c in ("t1", "t2", "pd")}}
         return extra[kind] | {"t1"} if kind in extra else needed(kind, f)
 
     corpus.maps_needed = maps_needed
