@@ -5,6 +5,7 @@ spacing, the angle count, and the overlays' display window and checkerboard."""
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
@@ -98,3 +99,28 @@ def test_display_window_and_checkerboard():
     np.testing.assert_array_equal(board[~first], wb[~first])
     assert windowed(np.array([3.0, 5.0]), 4.0, 4.0).tolist() == [0.0, 1.0]  # empty window: x - lo, clipped
     assert math.isclose(float(windowed(np.array([7.0]), 4.0, 10.0)[0]), 0.5)
+
+
+def test_histogram_threads_follow_omp_num_threads_else_the_cpus_up_to_four(monkeypatch):
+    from topomatch.stages.registration.histogram import histogram_threads
+
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    assert histogram_threads() == 3
+    for unset in ("", "0", "two"):
+        monkeypatch.setenv("OMP_NUM_THREADS", unset)
+        cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        assert histogram_threads() == max(1, min(4, cpus))
+
+
+@pytest.mark.parametrize("bad, message", [
+    (np.zeros((0, 5)), "empty"), (np.array([["a"] * 5] * 5), "not numbers"), (np.ones((5, 5)) * (1 + 1j), "complex"),
+    (np.where(np.eye(5) > 0, np.nan, 1.0), "5 of 25 pixels are NaN"), (np.full((5, 5), 2.0), "constant"),
+    (np.arange(15.0).reshape(3, 5), "too small"), (np.array([[-1e308, 1e308] * 3] * 5), "double precision")])
+def test_check_pixels_names_the_file_and_the_problem(bad, message):
+    from topomatch.pipeline.errors import InputError
+    from topomatch.stages.registration.io import check_pixels
+
+    with pytest.raises(InputError, match=f"in.png.*{message}"):
+        check_pixels(bad, "in.png")
+    good = check_pixels(np.arange(25, dtype=np.uint8).reshape(5, 5), "in.png")
+    assert good.dtype == np.float64 and good[4, 4] == 24.0
