@@ -102,10 +102,6 @@ class RegistrationOutcome:
         return out
 
 
-VolumeRegistrationOutcome = RegistrationOutcome
-"""The name of the 3D outcome before 2D and 3D shared one (kept for a release)."""
-
-
 def read_image(path: str | Path, *, slice: int | None = None) -> Image:
     """A 2D image or 3D volume (PNG, TIFF, NIfTI, DICOM file or series folder, MetaImage, NRRD), or one 2D slice
     of a volume (along its first array axis).
@@ -165,10 +161,7 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
 
 def register_with(fixed: Image | str | Path, moving: Image | str | Path,
                   overrides: dict[str, dict[str, Any]]) -> RegistrationOutcome:
-    """:func:`register` with the options as ``{stage: {param: value}}`` (what the CLI collects; ``register_3d``,
-    the 3D stage's name of the previous release, is read as ``register``)."""
-    options = {**overrides.get("register", {}), **overrides.get("register_3d", {})}
-    overrides = {**{k: v for k, v in overrides.items() if k != "register_3d"}, "register": options}
+    """:func:`register` with the options as ``{stage: {param: value}}`` (what the CLI collects)."""
     if isinstance(fixed, Image) != isinstance(moving, Image):
         raise InputError(None, "give both images as files or both as Image objects")
     if isinstance(fixed, Image):
@@ -185,7 +178,7 @@ def register_with(fixed: Image | str | Path, moving: Image | str | Path,
         if result.error_stage == "load_pair":
             raise InputError(None, result.error or "cannot read the images")
         raise StageError(result.error or "registration failed")
-    metric = RegisterParams.model_validate(options).metric
+    metric = RegisterParams.model_validate(overrides.get("register", {})).metric
     return RegistrationOutcome(names[0], names[1], result.final("registration"),
                                result.final("fixed") if not isinstance(fixed, Image) else fixed,
                                result.final("moving") if not isinstance(moving, Image) else moving,
@@ -298,7 +291,3 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     history = {k: np.asarray(v).tolist() for k, v in reg.history.items()}
     save(out / "registration.json", json.dumps({**outcome.to_dict(), "history": history}, default=str).encode())
     return [str(p) for p in written]
-
-
-write_volume_registration_files = write_registration_files
-"""The name of the 3D writer before 2D and 3D shared one (kept for a release)."""

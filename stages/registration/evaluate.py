@@ -105,9 +105,3 @@ def evaluate(fixed: Image, registration: Registration, truth, *, params: Evaluat
     """Errors per parameter, rotation and translation errors and mean/max target registration error against the
     known transform."""
     return evaluate_registration(fixed, registration, truth, params)
-
-
-@stage("evaluate_3d", params=EvaluateParams, version=2, consumes=("fixed", "registration", "truth"))
-def evaluate_3d(fixed: Image, registration: Registration, truth, *, params: EvaluateParams) -> EvaluateResult:
-    """The ``evaluate`` stage under its 3D name of the previous release (kept for a release)."""
-    return evaluate_registration(fixed, registration, truth, params)

@@ -159,10 +159,6 @@ def gaussian_blur(data: np.ndarray, sigmas, truncate: float = 4.0) -> np.ndarray
     return out
 
 
-Volume = Image
-"""The name of the 3D image type before 2D and 3D shared one (kept for a release)."""
-
-
 def otsu_threshold(values: np.ndarray, bins: int = 256) -> float:
     """Otsu's threshold (Otsu 1979: maximal between-class variance) of the values, on ``bins`` bins: SimpleITK's
     ``OtsuThreshold`` (tested) without its import (~0.2 s, as much as a 2D registration)."""

@@ -753,17 +753,7 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     return reg
 
 
-register_volumes = register
-"""The name of the 3D registration before 2D and 3D shared one (kept for a release)."""
-
-
 @stage("register", params=RegisterParams, version=2, consumes=("fixed", "moving"), produces=("registration",))
 def register_stage(fixed: Image, moving: Image, *, params: RegisterParams) -> RegisterResult:
     """Rigid registration (2D or 3D) by an entropic measure (JT, JR, MI, TMI) with SPSA or Powell, coarse to fine."""
-    return RegisterResult(register(fixed, moving, params))
-
-
-@stage("register_3d", params=RegisterParams, version=2, consumes=("fixed", "moving"), produces=("registration",))
-def register_3d_stage(fixed: Image, moving: Image, *, params: RegisterParams) -> RegisterResult:
-    """The ``register`` stage under its 3D name of the previous release (kept for a release)."""
     return RegisterResult(register(fixed, moving, params))

@@ -180,10 +180,6 @@ class RigidTransform:
         return cls.from_matrix(M, c if center is None else center)
 
 
-RigidTransform3D = RigidTransform
-"""The name of the 3D transform before 2D and 3D shared one (kept for a release)."""
-
-
 def from_thesis(tx: float, ty: float, angle: float, center) -> RigidTransform:
     """The ITK-convention 2D transform of thesis parameters (``R_thesis(a) = R_ITK(-a)``, degrees)."""
     return RigidTransform.euler2d(tx, ty, -angle, center)

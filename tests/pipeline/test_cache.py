@@ -84,7 +84,7 @@ VOLUME_CHAIN = [
     {"register": FAST_3D}, "evaluate",
     {"register_sitk_3d": {"shrink": [4], "smoothing": [2.0], "iterations": 5}},
 ]
-VOLUME_PAIR_CHAIN = ["load_pair", {"register_3d": FAST_3D}, "evaluate_3d"]
+VOLUME_PAIR_CHAIN = ["load_pair", {"register": FAST_3D}, "evaluate"]
 
 
 def _items(tmp_path):
