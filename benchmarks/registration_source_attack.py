@@ -25,6 +25,14 @@ as the corpus draws them, the translations scaled to small fields of view (:data
 once with the release of 2026-12-06 (a28d01c). Correct = mean TRE <= 1 pixel (2D) / 1 mm (3D); counts per kind:
 ok / FF (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
 
+``--split small-fov`` (seeds 39xxx): fields of view smaller than every corpus source's, where ``sources`` found the
+defaults' lengths (levels, SPSA steps in physical units) too large: ``mr-small`` again (fresh draws), the ITK T1 slice
+at 0.1 mm pixels (``itk-micro``: 18 x 22 mm, a small-animal scale), MNI axial sections at 0.25 mm (``mni-micro``:
+49 x 58 mm, sections at 20-80 % of the brain's height), nibabel's ``anatomical.nii`` at 0.5 mm (``anatomical-micro``:
+16 x 20 x 12 mm) and ITK's KmeansTest head at 0.2 x 0.2 x 0.3 mm (``kmeans-micro``: 26 x 26 x 19 mm): pixels as they
+are, spacing and origin relabelled (the corpus's masks, classes and tissue fractions kept; no thick slices). Declared with the twenty-fifth round (a small field registered in working
+units) before the round's code ran on anything but ``sources``' ``mr-small`` cases, and run once with it.
+
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_source_attack.py --dims 2 \\
         --json benchmarks/results/registration_source_attack_2d.json
 """
@@ -61,6 +69,13 @@ SECTIONS = {"dipy-b0": range(1, 9), "piesno": range(3, 11), "aniso": range(6, 19
 SOURCES = {2: [("dipy-coronal", 10), ("dipy-b0", 10), ("piesno", 10), ("aniso", 10), ("epi", 10), ("mr-small", 10),
                ("ct-small", 10)],
            3: [("aniso", 12), ("epi", 12)]}
+SMALL_SPLIT = "small-fov"
+SMALL_SOURCES = {2: [("mr-small", 10), ("itk-micro", 10), ("mni-micro", 10)],
+                 3: [("anatomical-micro", 12), ("kmeans-micro", 12)]}
+SMALL_SEEDS = {("mr-small", 2): 39602, ("itk-micro", 2): 39612, ("mni-micro", 2): 39622,
+               ("anatomical-micro", 3): 39303, ("kmeans-micro", 3): 39203}
+MICRO = {"itk-micro": 0.1, "mni-micro": 0.25, "anatomical-micro": 0.25, "kmeans-micro": 0.1}
+"""The factor each relabelled source's spacing and origin are multiplied by."""
 SEEDS = {("dipy-coronal", 2): 38102, ("dipy-b0", 2): 38202, ("piesno", 2): 38302, ("aniso", 2): 38402,
          ("epi", 2): 38502, ("mr-small", 2): 38602, ("ct-small", 2): 38702, ("aniso", 3): 38403, ("epi", 3): 38503}
 WHEEL_DIR: list[Path] = []
@@ -90,9 +105,17 @@ def member_file(package: str, member: str) -> Path:
     return out
 
 
+def micro(image: Image, factor: float) -> Image:
+    """The same pixels with spacing and origin multiplied by ``factor``."""
+    return Image(image.data, tuple(factor * s for s in image.spacing), tuple(factor * o for o in image.origin),
+                 image.direction, image.name, image.source)
+
+
 @lru_cache(maxsize=None)
 def volume(source: str) -> Image:
     """A 3D source as read by ``read_image`` (geometry kept); ``epi``: the first volume of the 4D file."""
+    if source in MICRO:
+        return micro_fields(source, 0).grid
     if source == "epi":
         import nibabel as nib
 
@@ -110,6 +133,18 @@ def volume(source: str) -> Image:
 
 
 @lru_cache(maxsize=None)
+def micro_fields(source: str, index: int) -> corpus.Fields:
+    """The corpus's fields of a relabelled source (tissue fractions, masks and classes as the corpus makes them)."""
+    if source == "itk-micro":
+        fields = corpus.itk_source()
+    elif source == "mni-micro":
+        fields = corpus.mni_section("axial", {"position": 0.2 + 0.6 * (index % 10) / 9, "spacing": 1, "frame": "as-is"})
+    else:
+        fields = corpus.volume_source(source.removesuffix("-micro"))
+    return fields.on(micro(fields.grid, MICRO[source]), fields.maps)
+
+
+@lru_cache(maxsize=None)
 def section(source: str, index: int) -> Image:
     """The 2D image of a 2D case (index: the case's number, which picks the section of a volume source)."""
     if source == "dipy-coronal":
@@ -117,6 +152,8 @@ def section(source: str, index: int) -> Image:
         return Image(data, (1.0, 1.0), None, None, source)
     if source in ("mr-small", "ct-small"):
         return read_image(member_file(*FILES[source]))
+    if source in MICRO:
+        return micro_fields(source, index).grid
     vol = volume(source)
     k = list(SECTIONS[source])[index % len(SECTIONS[source])]
     return Image(np.ascontiguousarray(vol.data[k], dtype=np.float64), tuple(vol.spacing[:2]), None, None,
@@ -127,15 +164,18 @@ def register_split() -> None:
     """Add the split and its sources to the corpus module (this process only)."""
     if SPLIT in corpus.SPLITS:
         return
-    corpus.SPLITS[SPLIT] = SOURCES
-    corpus.KINDS[SPLIT] = corpus.ELEVEN_KINDS
+    corpus.SPLITS.update({SPLIT: SOURCES, SMALL_SPLIT: SMALL_SOURCES})
+    corpus.KINDS.update({SPLIT: corpus.ELEVEN_KINDS, SMALL_SPLIT: corpus.ELEVEN_KINDS})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
-    corpus.SPLIT_ORDER[SPLIT] = max(corpus.SPLIT_ORDER.values()) + 100
+    corpus.SEEDS.update({(SMALL_SPLIT, source, dim): seed for (source, dim), seed in SMALL_SEEDS.items()})
+    corpus.SPLIT_ORDER.update({SPLIT: max(corpus.SPLIT_ORDER.values()) + 100, SMALL_SPLIT: 1e9})
     fields = corpus.source_fields
 
     def source_fields(spec: corpus.CaseSpec) -> corpus.Fields:
-        if spec.split != SPLIT:
+        if spec.split not in (SPLIT, SMALL_SPLIT):
             return fields(spec)
+        if spec.source in MICRO:
+            return micro_fields(spec.source, spec.index if spec.dim == 2 else 0)
         image = volume(spec.source) if spec.dim == 3 else section(spec.source, spec.index)
         return plain(image)
 
@@ -145,13 +185,15 @@ def register_split() -> None:
 
     def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
         spec = plan(split, source, dim, index, place)
-        if split != SPLIT:
+        if split not in (SPLIT, SMALL_SPLIT):
             return spec
         grid = volume(source) if dim == 3 else section(source, index)
         extent = float(min(np.asarray(grid.size) * np.asarray(grid.spacing)))
         scale = min(1.0, MAX_TRANSLATION_FRACTION * extent / corpus.MAX_TRANSLATION)
-        k = len(spec.truth) - dim
-        return dataclasses.replace(spec, truth=spec.truth[:k] + tuple(scale * t for t in spec.truth[k:]))
+        k = len(spec.truth) - dim  # no 4 mm slices on a field of a few millimetres
+        return dataclasses.replace(spec, truth=spec.truth[:k] + tuple(scale * t for t in spec.truth[k:]),
+                                   thick=spec.thick and split != SMALL_SPLIT,
+                                   section=None if source in MICRO else spec.section)
 
     corpus.plan_case = plan_case
 
