@@ -105,6 +105,11 @@ class Image:
         return Image(data, self.spacing, self.origin, self.direction, self.name if name is None else name,
                      self.source if source is None else source)
 
+    def scaled(self, factor: float) -> "Image":
+        """The same pixels with spacing and origin times ``factor``: physical coordinates times ``factor``."""
+        return Image(self.data, tuple(factor * np.asarray(self.spacing)), tuple(factor * np.asarray(self.origin)),
+                     self.direction, self.name, self.source)
+
     def shrink(self, factors) -> "Image":
         """Block average by integer ``factors`` (ITK order), trailing partial blocks dropped: each pixel the mean of
         its block at the block's physical centre (spacing ``s * f``, origin moved by ``(f - 1) / 2`` pixels)."""

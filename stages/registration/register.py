@@ -33,6 +33,10 @@ MIN_LEVEL_VOXELS = 8
 MIN_LEVEL_SAMPLES = 2000
 """Fewest fixed samples of a level's measure; a coarser level with fewer is measured on the grid of the first
 finer level with enough, smoothed (its schedule entry is kept)."""
+SMALL_FIELD = 64.0
+"""Physical units: the defaults' lengths (levels, steps, start grid, margin, the self-check's distances) were chosen on
+fields of view at least this large; a fixed grid whose largest extent is smaller is registered in working units of
+that extent over this (``measures['unit']``; twenty-fifth round) and the result is scaled back."""
 SMALL_FOV_SIGMA = 0.3
 """Gaussian sigma, as a fraction of the level's spacing, that stands in for its block average on a finer grid (a
 block of width s has a standard deviation of s / sqrt(12) = 0.29 s)."""
@@ -732,6 +736,9 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         if fixed_mask.shape != fixed.shape or not fixed_mask.any():
             raise StageError(f"the fixed mask (shape {fixed_mask.shape}, {int(fixed_mask.sum())} pixels) must select "
                              f"pixels of the fixed image (shape {fixed.shape})")
+    unit = min(1.0, float(np.max(np.asarray(fixed.size) * fixed.spacing)) / SMALL_FIELD)
+    if unit < 1.0:
+        fixed, moving = fixed.scaled(1.0 / unit), moving.scaled(1.0 / unit)
     run = _Run(fixed, moving, params, fixed_mask if fixed_mask is not None else sample_mask(fixed, params), callback)
     theta, stop = run.schedule_from(run.start)
     fine = run.levels[-1].objective
@@ -744,10 +751,14 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         flags = self_check(run, theta, value, stop)
     keys = ("level", "theta", "value", "step", "blocked")
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
+    if unit < 1.0:
+        history["theta"] = history["theta"] * np.r_[[1.0] * run.k, [unit] * run.dim] if run.history else np.zeros(0)
+        run.measures["unit"] = unit
+        flags = [Flag(f.check, f"{f.message} (lengths in working units of {unit:.4g})") for f in flags]
     evaluations = sum({id(lv.objective): lv.objective.n_evals for lv in run.levels}.values())
-    reg = Registration(run.at(theta), float(value), tuple(flags), params.method(), time.perf_counter() - t0,
-                       int(len(history["level"])), evaluations, stop, history, run.at(run.start), fine.overlap(theta),
-                       restarts, dict(run.measures))
+    reg = Registration(run.at(theta).scaled(unit), float(value), tuple(flags), params.method(),
+                       time.perf_counter() - t0, int(len(history["level"])), evaluations, stop, history,
+                       run.at(run.start).scaled(unit), fine.overlap(theta), restarts, dict(run.measures))
     if flags and params.check.on_failure == "error":
         raise StageError(f"registration failed: {reg.reason} (estimate {describe(reg.transform)})")
     return reg

@@ -143,6 +143,11 @@ class RigidTransform:
         """The same map written about another centre (same angles, another translation)."""
         return RigidTransform.from_matrix(self.matrix(), center)
 
+    def scaled(self, factor: float) -> "RigidTransform":
+        """The same map on physical coordinates times ``factor`` (translation and centre times ``factor``)."""
+        k = n_angles(self.dim)
+        return RigidTransform(self.parameters[:k] + tuple(factor * self.translation), factor * np.asarray(self.center))
+
     def inverse(self) -> "RigidTransform":
         """T^-1, about the same centre."""
         return RigidTransform.from_matrix(np.linalg.inv(self.matrix()), self.center)
