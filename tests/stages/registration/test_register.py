@@ -245,3 +245,37 @@ def test_before_after_of_the_identity_is_the_moving_image():
     views = planes(vol)
     assert [v[1].shape for v in views] == [(7, 8), (6, 8), (6, 7)] and views[1][2] == pytest.approx(3.0)
     assert len(planes(Image(np.zeros((5, 6))))) == 1
+
+
+def test_a_small_field_is_registered_in_working_units(pd_slice):
+    """The PD slice at 0.1 and 0.2 mm pixels (18 x 22 and 36 x 43 mm, smaller than SMALL_FIELD: a small-animal
+    scale), moved by 10 deg and (13, 17) pixels: recovered within a pixel, in working units of the largest extent
+    over SMALL_FIELD (``measures['unit']``), so that the two answers are one answer at two scales. Registered in
+    millimetres, the defaults' steps (up to 4 mm) throw a 20 mm field about (the sources attack's ``mr-small``)."""
+    from topomatch.stages.registration.register import SMALL_FIELD
+
+    results = []
+    for spacing in (0.1, 0.2):
+        fixed = Image(pd_slice.data, (spacing, spacing), name="pd-small")
+        truth = RigidTransform.euler2d(13 * spacing, 17 * spacing, 10.0, fixed.center)
+        reg = register(fixed, moved(fixed, truth))
+        ev = evaluate_registration(fixed, reg, _truth(13 * spacing, 17 * spacing, 10.0))
+        assert reg.ok and ev.tre_mean < spacing, (spacing, ev.tre_mean, reg.reason)
+        assert reg.measures["unit"] == pytest.approx(217 * spacing / SMALL_FIELD)
+        results.append(reg.transform)
+    small, large = results
+    assert small.angles_deg[0] == pytest.approx(large.angles_deg[0], abs=0.05)
+    np.testing.assert_allclose(2 * small.translation, large.translation, atol=0.01)
+
+
+@pytest.mark.parametrize("corner", [(60, 60), (80, 50), (100, 90)])
+@pytest.mark.parametrize("angle, tx, ty", [(15.0, 1.0, -1.0), (-12.0, -2.0, 1.5)])
+def test_a_20_mm_field_is_recovered(pd_slice, corner, angle, tx, ty):
+    """64 x 64 windows of the PD slice at 0.3125 mm (pydicom's ``MR_small`` geometry: a 20 mm field) with 2 % noise:
+    within a tenth of a pixel. Registered in millimetres (before the twenty-fifth round), (80, 50) at 15 deg and
+    (100, 90) at -12 deg ended 20 and 39 pixels away, flagged."""
+    s, (r, c) = 0.3125, corner
+    fixed = Image(pd_slice.data[r: r + 64, c: c + 64], (s, s), name="pd-window")
+    reg = register(fixed, moved(fixed, RigidTransform.euler2d(tx, ty, angle, fixed.center), noise=0.02))
+    ev = evaluate_registration(fixed, reg, _truth(tx, ty, angle))
+    assert reg.ok and ev.tre_mean < 0.1 * s, (ev.tre_mean / s, reg.reason)

@@ -124,3 +124,19 @@ def test_check_pixels_names_the_file_and_the_problem(bad, message):
         check_pixels(bad, "in.png")
     good = check_pixels(np.arange(25, dtype=np.uint8).reshape(5, 5), "in.png")
     assert good.dtype == np.float64 and good[4, 4] == 24.0
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_scaled_image_and_transform_multiply_physical_coordinates(d):
+    from topomatch.stages.registration.transform import RigidTransform
+
+    rng = np.random.default_rng(d)
+    direction = np.linalg.qr(rng.normal(size=(d, d)))[0]
+    image = Image(rng.uniform(size=(4,) * d), tuple(rng.uniform(0.5, 2, d)), tuple(rng.normal(size=d)), direction)
+    big = image.scaled(2.5)
+    np.testing.assert_allclose(big.points(), 2.5 * image.points(), atol=1e-12)
+    assert big.data is image.data and np.array_equal(big.direction, image.direction)
+    t = RigidTransform(tuple(rng.normal(size=3 * d - 3)), tuple(rng.normal(size=d)))
+    p = rng.normal(size=(6, d))
+    np.testing.assert_allclose(t.scaled(2.5).apply(2.5 * p), 2.5 * t.apply(p), atol=1e-12)
+    assert t.scaled(2.5).angles == t.angles
