@@ -172,3 +172,14 @@ def test_uniform_weights_give_a_sharper_relative_peak(pd_slice):
     unif = scan(pd_slice, pd_slice, params.model_copy(update={"weights": "uniform"}))
     rel = lambda v: np.nanmean(v) / np.nanmax(v)  # noqa: E731
     assert rel(unif.values["tx"][0]) < rel(hist.values["tx"][0])
+
+
+def test_landscape_of_a_misaligned_volume_peaks_at_its_truth():
+    """3D with a known non-zero misalignment (``misalign``'s theta, degrees and mm): every one of the six scans
+    about the truth peaks at offset 0 (the scan's step is 1 mm and 2 degrees)."""
+    theta = [4.0, -3.0, 5.0, 2.0, -1.5, 3.0]
+    res = misalign(_volume((24, 26, 28)), params=MisalignParams(theta=theta))
+    land = scan(res.fixed, res.moving, LandscapeParams(alphas=[2.0], center=theta, translation_range=3,
+                                                       angle_range=6, points=7, bins=16, interpolation="parzen"))
+    assert all(land.offsets[n][np.argmax(v[0])] == 0.0 for n, v in land.values.items()), {
+        n: float(land.offsets[n][np.argmax(v[0])]) for n, v in land.values.items()}
