@@ -163,3 +163,81 @@ def test_make_case_moves_the_source_by_its_truth(d):
     core = tuple(slice(n // 2 - 4, n // 2 + 4) for n in shape)
     np.testing.assert_allclose(back[core], source.data[core], atol=1e-9)
     np.testing.assert_array_equal(case.fixed.data, source.data)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_histogram_positions_are_the_moving_indices_of_the_mapped_samples(d):
+    """Without jitter, sample p's moving index is ``moving.continuous_index(T(p))`` (ITK order); ``shuffled`` keeps
+    both marginals and the sample count."""
+    from topomatch.stages.registration.histogram import Binning, JointHistogram
+
+    rng = np.random.default_rng(d)
+    shape = (9, 10, 11)[:d]
+    fixed = Image(rng.random(shape), (1.0, 1.5, 2.0)[:d], (3.0, -2.0, 1.0)[:d])
+    direction = np.linalg.qr(rng.normal(size=(d, d)))[0]
+    moving = Image(rng.random((8, 12, 7)[:d]), (2.0, 1.0, 1.5)[:d], (-1.0, 4.0, 2.0)[:d], direction)
+    jh = JointHistogram(fixed, moving, Binning.of(fixed.data, 8), Binning.of(moving.data, 8), center=fixed.center,
+                        mode="linear")
+    t = RigidTransform(tuple(rng.normal(scale=0.2, size=3 * d - 3 - d)) + tuple(rng.normal(size=d)), fixed.center)
+    np.testing.assert_allclose(jh.positions(np.asarray(t.parameters)), moving.continuous_index(t.apply(fixed.points())).T,
+                               atol=1e-9)
+    h, n = jh(np.zeros(3 * d - 3))
+    hs, ns = jh.shuffled(5)(np.zeros(3 * d - 3))
+    assert ns == n
+    np.testing.assert_allclose(hs.sum(axis=0), h.sum(axis=0), atol=1e-9)  # moving marginal: the same samples
+    np.testing.assert_allclose(hs.sum(axis=1), h.sum(axis=1), atol=1e-9)  # fixed marginal: permuted, same counts
+
+
+def test_objective_in_3d_undefined_below_its_overlap_and_weighted_by_it():
+    """A volume against itself shifted by a third of its i extent: 2/3 of the samples inside; the measure times the
+    overlap to ``overlap_power``; -inf once ``min_overlap`` exceeds it (``on`` keeps the settings, or changes it)."""
+    from topomatch.stages.registration.histogram import Binning, JointHistogram
+    from topomatch.stages.registration.objective import Objective
+
+    vol = Image(np.random.default_rng(0).random((6, 7, 9)), (1.0, 1.0, 2.0))
+    b = Binning.of(vol.data, 8)
+    jh = JointHistogram(vol, vol, b, b, center=vol.center, mode="linear")
+    theta = np.array([0.0, 0.0, 0.0, 3.0, 0.0, 0.0])  # 3 of the 9 columns (i: 1 mm each) leave the grid
+    plain = Objective(jh, "jt", min_overlap=0.5)
+    weighted = Objective(jh, "jt", min_overlap=0.5, overlap_power=1.0)
+    assert plain.overlap(theta) == pytest.approx(6 / 9)
+    assert weighted(theta) == pytest.approx(plain(theta) * 6 / 9)
+    assert plain.on(jh, min_overlap=0.7)(theta) == -math.inf and plain.on(jh)(theta) == plain(theta)
+
+
+def test_misalign_pair_moves_the_moving_image_by_its_transform():
+    from topomatch.stages.registration.misalign import MisalignParams, misalign_pair
+
+    rng = np.random.default_rng(3)
+    fixed, moving = Image(rng.random((20, 22))), Image(rng.random((20, 22)))
+    params = MisalignParams(theta=[7.0, 2.0, -3.0], order=1)
+    out = misalign_pair(fixed, moving, {"angle": 0.0, "tx": 0.0, "ty": 0.0}, params=params)
+    truth = RigidTransform.from_degrees([7.0, 2.0, -3.0], fixed.center)
+    np.testing.assert_array_equal(out.moving.data, moved(moving, truth, order=1).data)
+    assert out.truth == pytest.approx({"angle": 7.0, "tx": 2.0, "ty": -3.0})
+
+
+def test_accuracy_rows_count_by_hand():
+    from types import SimpleNamespace
+
+    from topomatch.stages.registration.reports import accuracy_rows
+
+    evs = [SimpleNamespace(method="m", tre_mean=t, seconds=s, flagged=f)
+           for t, s, f in ((0.5, 1.0, False), (2.0, 2.0, False), (0.8, 4.0, True))]
+    (row,) = [r for r in accuracy_rows([("g", e) for e in evs], 1.0) if r["pairs"] == "all"]
+    assert row["success_rate"] == pytest.approx(2 / 3) and row["median_tre"] == 0.8 and row["max_tre"] == 2.0
+    assert (row["failed_unflagged"], row["ok_but_flagged"], row["failed_and_flagged"], row["flagged"]) == (1, 1, 0, 1)
+    assert row["median_seconds"] == 2.0 and row["mean_seconds"] == pytest.approx(7 / 3)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_before_after_resamples_by_the_identity_then_the_transform(d):
+    from topomatch.stages.registration.reports import before_after
+
+    b = np.random.default_rng(d).random((5, 6, 7)[:d])
+    image = Image(b)
+    shift = RigidTransform((0.0,) * (3 * d - 3 - d) + (1.0,) + (0.0,) * (d - 1), tuple(image.center))  # x + 1
+    before, after = before_after(image, image, shift)
+    np.testing.assert_allclose(before, b, atol=1e-12)
+    np.testing.assert_allclose(after[..., :-1], b[..., 1:], atol=1e-12)  # moving(p + 1 along x)
+    assert np.all(after[..., -1] == b.min())
