@@ -737,8 +737,11 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
             raise StageError(f"the fixed mask (shape {fixed_mask.shape}, {int(fixed_mask.sum())} pixels) must select "
                              f"pixels of the fixed image (shape {fixed.shape})")
     unit = min(1.0, float(np.max(np.asarray(fixed.size) * fixed.spacing)) / SMALL_FIELD)
-    if unit < 1.0:
+    if unit < 1.0:  # a small field: registered in working units, the answer (and what callback sees) scaled back
+        scale = np.r_[[1.0] * n_angles(fixed.dim), [unit] * fixed.dim]
         fixed, moving = fixed.scaled(1.0 / unit), moving.scaled(1.0 / unit)
+        if callback is not None:
+            callback = (lambda user: lambda level, k, theta, value: user(level, k, theta * scale, value))(callback)
     run = _Run(fixed, moving, params, fixed_mask if fixed_mask is not None else sample_mask(fixed, params), callback)
     theta, stop = run.schedule_from(run.start)
     fine = run.levels[-1].objective
@@ -752,7 +755,7 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     keys = ("level", "theta", "value", "step", "blocked")
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
     if unit < 1.0:
-        history["theta"] = history["theta"] * np.r_[[1.0] * run.k, [unit] * run.dim] if run.history else np.zeros(0)
+        history["theta"] = history["theta"] * scale if run.history else np.zeros(0)
         run.measures["unit"] = unit
         flags = [Flag(f.check, f"{f.message} (lengths in working units of {unit:.4g})") for f in flags]
     evaluations = sum({id(lv.objective): lv.objective.n_evals for lv in run.levels}.values())

@@ -262,6 +262,10 @@ def test_a_small_field_is_registered_in_working_units(pd_slice):
         ev = evaluate_registration(fixed, reg, _truth(13 * spacing, 17 * spacing, 10.0))
         assert reg.ok and ev.tre_mean < spacing, (spacing, ev.tre_mean, reg.reason)
         assert reg.measures["unit"] == pytest.approx(217 * spacing / SMALL_FIELD)
+        seen = []
+        again = register(fixed, moved(fixed, truth), callback=lambda level, k, theta, value: seen.append(theta))
+        np.testing.assert_allclose(seen, reg.history["theta"])  # physical units, as the history
+        assert again.transform == reg.transform
         results.append(reg.transform)
     small, large = results
     assert small.angles_deg[0] == pytest.approx(large.angles_deg[0], abs=0.05)
