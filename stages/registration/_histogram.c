@@ -112,13 +112,12 @@ static PyObject *joint_histogram(PyObject *self, PyObject *args) {
                   n, n * k / threads, n * (k + 1) / threads, mi, mj, mk, 0, bmax, mode};
         if (k > 0) {  /* every other pass accumulates privately; summed into h0, h1 below */
             extra[k] = (double *)calloc(2 * (size_t)cells, sizeof(double));
-            if (extra[k] == NULL) { t.begin = t.end; }
-            else { t.g0 = extra[k]; t.g1 = extra[k] + cells; }
+            if (extra[k] != NULL) { t.g0 = extra[k]; t.g1 = extra[k] + cells; }  /* else: run here, after pass 0 */
         }
         pass[k] = t;
     }
     for (int k = 1; k < threads; k++)
-        started[k] = pthread_create(&id[k], NULL, accumulate, &pass[k]) == 0;
+        started[k] = extra[k] != NULL && pthread_create(&id[k], NULL, accumulate, &pass[k]) == 0;
     accumulate(&pass[0]);
     for (int k = 1; k < threads; k++) {
         if (started[k]) pthread_join(id[k], NULL);

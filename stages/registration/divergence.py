@@ -32,8 +32,7 @@ def _power_sum(p: np.ndarray, alpha: float, axis: int = -1) -> np.ndarray:
     """``sum p^alpha`` along ``axis`` with ``0^alpha = 0``."""
     if alpha == 2.0:
         return np.einsum("...i,...i->...", p, p) if axis in (-1, p.ndim - 1) else (p * p).sum(axis=axis)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        q = np.where(p > 0, np.power(np.where(p > 0, p, 1.0), alpha), 0.0)
+    q = np.where(p > 0, np.power(np.where(p > 0, p, 1.0), alpha), 0.0)
     return q.sum(axis=axis)
 
 

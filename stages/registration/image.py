@@ -151,16 +151,10 @@ def gaussian_blur(data: np.ndarray, sigmas, truncate: float = 4.0) -> np.ndarray
         r = int(truncate * sigma + 0.5)
         w = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
         w /= w.sum()
-        pad = [(0, 0)] * out.ndim
-        pad[axis] = (r, r)
-        padded = np.pad(out, pad, mode="edge")
-        acc = np.zeros_like(out)
+        pad = [(r, r) if a == axis else (0, 0) for a in range(out.ndim)]
+        padded = np.moveaxis(np.pad(out, pad, mode="edge"), axis, 0)  # a view, the blurred axis first
         n = out.shape[axis]
-        for k, wk in enumerate(w):
-            index = [slice(None)] * out.ndim
-            index[axis] = slice(k, k + n)
-            acc += wk * padded[tuple(index)]
-        out = acc
+        out = np.moveaxis(sum(wk * padded[k: k + n] for k, wk in enumerate(w)), 0, axis)
     return out
 
 
@@ -206,14 +200,10 @@ def grow(mask: np.ndarray, distance: float, spacing=None) -> np.ndarray:
     for axis, s in enumerate((1.0,) * out.ndim if spacing is None else spacing[::-1]):  # array axis, its spacing
         r = int(round(distance / s))
         grown = out.copy()
-        for shift in range(1, r + 1):
-            if shift >= out.shape[axis]:
-                break
-            lead = [slice(None)] * out.ndim
-            lag = [slice(None)] * out.ndim
-            lead[axis], lag[axis] = slice(shift, None), slice(None, -shift)
-            grown[tuple(lag)] |= out[tuple(lead)]
-            grown[tuple(lead)] |= out[tuple(lag)]
+        o, g = np.moveaxis(out, axis, 0), np.moveaxis(grown, axis, 0)  # views, the grown axis first
+        for shift in range(1, min(r, len(o) - 1) + 1):
+            g[:-shift] |= o[shift:]
+            g[shift:] |= o[:-shift]
         out = grown
     return out
 

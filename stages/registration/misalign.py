@@ -76,12 +76,9 @@ def crop_slab(image: Image, axis: int, fraction: float, start_fraction: float) -
     n = image.size[axis]
     keep = max(2, int(round(fraction * n)))
     start = int(round(start_fraction * (n - keep)))
-    index = [slice(None)] * image.dim
-    index[image.dim - 1 - axis] = slice(start, start + keep)
-    first = np.zeros(image.dim)
-    first[axis] = start
-    return Image(image.data[tuple(index)].copy(), image.spacing, tuple(image.physical(first[None, :])[0]),
-                 image.direction, image.name, f"{image.source} cropped")
+    first = start * np.eye(image.dim)[axis]  # the first kept pixel's index, ITK order
+    return Image(np.take(image.data, range(start, start + keep), axis=image.dim - 1 - axis), image.spacing,
+                 tuple(image.physical(first[None, :])[0]), image.direction, image.name, f"{image.source} cropped")
 
 
 @dataclass(frozen=True)

@@ -274,8 +274,6 @@ class _Run:
             if math.isfinite(coarse(theta)) and all(np.linalg.norm(theta[self.k:] - other[self.k:]) >= 0.5 * st.spacing
                                                     for other in chosen):
                 chosen.append(theta)
-        if not chosen:
-            return scored[0][2]
         if st.iterations == 0 or len(chosen) == 1:
             return chosen[0]
         spec = self.levels[0].spec.model_copy(update={"iterations": st.iterations})

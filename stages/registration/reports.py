@@ -141,8 +141,7 @@ def conditional_distributions_report(experiment, results, params: ConditionalPar
             P, w = conditionals(h)
             jt = jensen_tsallis_histogram(h, params.alpha)
             full = np.zeros_like(h)
-            rows_kept = h.sum(axis=1) > 0
-            full[rows_kept] = P
+            full[h.sum(axis=1) > 0] = P  # the rows the conditionals are defined on
             ax = axes[0][k]
             ax.imshow(full, cmap="magma", aspect="auto", origin="lower", vmin=0, vmax=1)
             ax.set_title(f"theta = {tuple(float(t) for t in theta)}\nJT(alpha={params.alpha:g}) = {jt:.3f}", fontsize=8)
@@ -276,9 +275,8 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
 
 def checkerboard(a: np.ndarray, b: np.ndarray, tiles: int = 8) -> np.ndarray:
     """Alternate square tiles of two images of the same shape (each in its :func:`display_window`)."""
-    H, W = a.shape
-    s = max(1, min(H, W) // tiles)
-    rows, cols = np.mgrid[0:H, 0:W]
+    s = max(1, min(a.shape) // tiles)
+    rows, cols = np.indices(a.shape)
     mask = ((rows // s) + (cols // s)) % 2 == 0
     return np.where(mask, windowed(a, *display_window(a)), windowed(b, *display_window(b)))
 
@@ -449,14 +447,12 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
     A registration repeated across sweep points of a later stage (same pair, method and truth) counts once."""
     import matplotlib.pyplot as plt
 
-    evaluations, seen = [], set()
+    unique: dict[tuple, tuple[str, Any]] = {}
     for r in results:
         for ev in _of_type(r, EvaluateResult):
             # a stage before a swept one (e.g. SimpleITK before register.metric.name) repeats per sweep point: count once
-            key = (_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values()))
-            if key not in seen:
-                seen.add(key)
-                evaluations.append((_label(r), ev))
+            unique.setdefault((_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values())), (_label(r), ev))
+    evaluations = list(unique.values())
     if not evaluations:
         return ReportOutput(notes=["no evaluate results"])
     rows = accuracy_rows(evaluations, params.threshold)

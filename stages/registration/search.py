@@ -82,11 +82,8 @@ class SearchImages:
         """(Re)build the padded moving bins (outside: ``K``) and content with at least ``pad`` cells a side."""
         if pad <= self._pad:
             return
-        inner = tuple(slice(pad, pad + n) for n in self._moving_bins_small.shape)
-        bins = np.full([n + 2 * pad for n in self._moving_bins_small.shape], self.K, dtype=np.int32)
-        bins[inner] = self._moving_bins_small
-        content = np.zeros(bins.shape, dtype=bool)
-        content[inner] = self._moving_content
+        bins = np.pad(self._moving_bins_small.astype(np.int32), pad, constant_values=self.K)
+        content = np.pad(self._moving_content, pad)
         self._pad, self._bins_canvas, self._content_canvas = pad, bins.ravel(), content.ravel()
         self._strides = np.cumprod((1,) + bins.shape[::-1][:-1])  # per ITK axis
 
