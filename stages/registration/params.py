@@ -132,8 +132,9 @@ class StartSpec(Params):
 class BoundsSpec(Params):
     """The search box around the start."""
 
-    max_translation: float | None = Field(None, gt=0, description="bound on each translation from the start "
-                                                                  "(default: half the fixed image's smallest extent)")
+    max_translation: float | None = Field(None, gt=0, allow_inf_nan=False, description="bound on each translation from "
+                                          "the start (default: half the fixed image's smallest extent; at most the two "
+                                          "images' largest extents added, beyond which they cannot overlap)")
     max_angle: float = Field(60.0, gt=0, le=180, description="bound on each angle (degrees)")
 
 

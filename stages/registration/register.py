@@ -177,7 +177,8 @@ class _Run:
         self.start = self.start_search(initial_translation(fixed, moving, params.transform.init))
         b = params.bounds
         extent = np.asarray(fixed.size) * np.asarray(fixed.spacing)
-        self.max_translation = b.max_translation if b.max_translation is not None else 0.5 * float(extent.min())
+        reach = float(extent.max() + np.max(np.asarray(moving.size) * np.asarray(moving.spacing)))  # overlap's limit
+        self.max_translation = min(b.max_translation or 0.5 * float(extent.min()), reach)
         a = math.radians(b.max_angle)
         self.lower = np.r_[[-a] * self.k, self.start[self.k:] - self.max_translation]
         self.upper = np.r_[[a] * self.k, self.start[self.k:] + self.max_translation]

@@ -283,3 +283,15 @@ def test_a_20_mm_field_is_recovered(pd_slice, corner, angle, tx, ty):
     reg = register(fixed, moved(fixed, RigidTransform.euler2d(tx, ty, angle, fixed.center), noise=0.02))
     ev = evaluate_registration(fixed, reg, _truth(tx, ty, angle))
     assert reg.ok and ev.tre_mean < 0.1 * s, (ev.tre_mean / s, reg.reason)
+
+
+def test_a_huge_translation_bound_is_held_to_where_the_images_can_overlap(pd_slice):
+    """``bounds.max_translation`` = 1e20 (a user's "no limit") is held to the two images' largest extents added: the
+    coarse search stays the size it would be at that bound, and the known transform is recovered (it used to
+    allocate gigabytes, then fail with an internal error)."""
+    truth = RigidTransform.euler2d(4.0, -6.0, 9.0, pd_slice.center)
+    reg = register(pd_slice, moved(pd_slice, truth), RegisterParams(bounds={"max_translation": 1e20}))
+    ev = evaluate_registration(pd_slice, reg, _truth(4.0, -6.0, 9.0))
+    assert reg.ok and ev.tre_mean < 0.3, (ev.tre_mean, reg.reason)
+    with pytest.raises(ConfigError, match="finite"):
+        RegisterParams.parse({"bounds": {"max_translation": math.inf}}, "register")
