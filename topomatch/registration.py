@@ -12,6 +12,7 @@ Two 2D images (or slices: ``fixed_slice`` / ``moving_slice``) give the three par
 
 from __future__ import annotations
 
+import errno
 import io
 import json
 import math
@@ -228,7 +229,8 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     DICOM or in-memory images), ``transform.tfm`` (SimpleITK's Euler2D / Euler3D transform of the result:
     ``sitk.ReadTransform`` reads it, ``sitk.Resample(moving, fixed, T)`` gives the resampling),
     ``overlay.png`` (fixed, moving, checkerboards before / after, colour overlay; three orthogonal planes for a
-    volume) and ``registration.json`` (the JSON fields and the optimiser's history); returns their paths."""
+    volume) and ``registration.json`` (the JSON fields and the optimiser's history); returns their paths. A file that
+    cannot be written does not stop the others: the first such OSError is raised once all were tried."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -248,19 +250,28 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     from_file = moving_path.exists() and "slice" not in moving.source  # the whole file, not a slice or in memory
     suffix = output_suffix(moving_path) if from_file else ".nii.gz"
     written: list[Path] = []
+    failures: list[OSError] = []
 
     inputs = {Path(p).resolve() for p in (outcome.fixed, outcome.moving) if isinstance(p, (str, Path))}
 
     def save(path: Path, data: bytes | None = None, write=None) -> None:
         if path.resolve() in inputs:  # --out next to the inputs: never write over one of them
             raise InputError(path, "is one of the registration's input files: choose another --out folder")
-        tmp = path.with_name(f".tmp-{path.name}")
-        if data is not None:
-            atomic_write_bytes(path, data)
-        else:
-            write(tmp)
-            tmp.replace(path)
-        written.append(path)
+        try:
+            if data is not None:
+                atomic_write_bytes(path, data)
+            else:  # a writer that takes a path (SimpleITK): the same all-or-nothing rename, the error naming `path`
+                if path.is_dir():
+                    raise IsADirectoryError(errno.EISDIR, "is a folder, not a file", str(path))
+                tmp = path.with_name(f".tmp-{path.name}")
+                try:
+                    write(tmp)
+                    tmp.replace(path)
+                finally:
+                    tmp.unlink(missing_ok=True)
+            written.append(path)
+        except OSError as exc:  # the other files are still written; the first failure is raised at the end
+            failures.append(exc)
 
     if suffix == ".png":
         from PIL import Image as PILImage
@@ -290,4 +301,6 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     save(out / "overlay.png", buf.getvalue())
     history = {k: np.asarray(v).tolist() for k, v in reg.history.items()}
     save(out / "registration.json", json.dumps({**outcome.to_dict(), "history": history}, default=str).encode())
+    if failures:
+        raise failures[0]
     return [str(p) for p in written]

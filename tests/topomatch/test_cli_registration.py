@@ -217,3 +217,16 @@ def test_cli_set_reaches_any_parameter_and_names_the_wrong_ones(capsys, itk_dir)
                         ("nothing", "expected param=value")]:
         code, out, err = register_cli(capsys, pd, shifted, "--set", item)
         assert code == 2 and words in err and out == ""
+
+
+def test_a_file_that_cannot_be_written_loses_no_result(capsys, itk_dir, tmp_path):
+    """A folder where ``transform.tfm`` should go: the result is printed, every other file is written, no temporary
+    file is left, and the error names the path in the way (exit 1)."""
+    out = tmp_path / "out"
+    (out / "transform.tfm").mkdir(parents=True)
+    code, stdout, err = register_cli(capsys, itk_dir / "BrainProtonDensitySlice.png",
+                                     itk_dir / "BrainProtonDensitySliceR10X13Y17.png", "--out", out, "--json")
+    assert code == 1 and "transform.tfm: is a folder, not a file" in err
+    assert json.loads(stdout)["angles"][0] == pytest.approx(10.0, abs=0.1)
+    assert {p.name for p in out.iterdir()} == {"moving_resampled.png", "moving_resampled.tif", "overlay.png",
+                                               "registration.json", "transform.tfm"}

@@ -18,7 +18,7 @@ import argparse
 
 from topomatch.cli.common import command, input_path, path_argument, print_result
 from topomatch.pipeline.cli_options import Option, add_options, add_set_option, given_options, set_options
-from topomatch.pipeline.errors import TopomatchError
+from topomatch.pipeline.errors import InputError, TopomatchError
 from topomatch.pipeline.files import check_writable_folder
 
 
@@ -70,12 +70,17 @@ def cmd_register(args: argparse.Namespace) -> int:
         check_outputs_spare_inputs(args.out, args.fixed, args.moving)
     options = set_options(given_options(args, _models(), _options()), args.set_values, _models(), "register")
     outcome = register_with(args.fixed, args.moving, options)
-    summary = outcome.to_dict()
+    summary, unwritten = outcome.to_dict(), None
     if args.out:
-        summary["files"] = write_registration_files(outcome, args.out)
+        try:
+            summary["files"] = write_registration_files(outcome, args.out)
+        except (OSError, InputError) as exc:  # printed after the result: a failed write loses nothing computed
+            unwritten = exc
     keys = (("tx", "ty", "angle") if outcome.dimension == 2 else ("angles", "translation")) + (
         "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok", "reason", "method", "files")
     print_result(summary, as_json=args.json, keys=keys)
+    if unwritten is not None:
+        raise unwritten
     if not outcome.ok:
         raise RegistrationFlagged(f"registration flagged: {outcome.reason}")
     return 0
