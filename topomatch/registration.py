@@ -237,7 +237,6 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     import matplotlib.pyplot as plt
     import SimpleITK as sitk
 
-    from topomatch.stages.registration.interpolation import resample
     from topomatch.stages.imaging.files import keep_locale, output_suffix
     from topomatch.stages.registration.io import to_sitk, write_transform
     from topomatch.stages.registration.reports import overlay_figure
@@ -245,7 +244,8 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     fixed, moving, reg = outcome.fixed_image, outcome.moving_image, outcome.registration
-    resampled = resample(moving, reg.transform, fixed, fill=float(moving.data.min()))
+    resampled = sitk.GetArrayFromImage(sitk.Resample(to_sitk(moving), to_sitk(fixed), reg.transform.to_sitk(),
+                                                     sitk.sitkLinear, float(moving.data.min()), sitk.sitkFloat64))
     moving_path = Path(outcome.moving)
     from_file = moving_path.exists() and "slice" not in moving.source  # the whole file, not a slice or in memory
     suffix = output_suffix(moving_path) if from_file else ".nii.gz"

@@ -230,3 +230,31 @@ def test_a_file_that_cannot_be_written_loses_no_result(capsys, itk_dir, tmp_path
     assert json.loads(stdout)["angles"][0] == pytest.approx(10.0, abs=0.1)
     assert {p.name for p in out.iterdir()} == {"moving_resampled.png", "moving_resampled.tif", "overlay.png",
                                                "registration.json", "transform.tfm"}
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_moving_resampled_is_simpleitks_resampling_by_the_written_transform(capsys, itk_dir, tmp_path, d):
+    """What the ``--out`` docs promise: ``sitk.Resample(moving, fixed, sitk.ReadTransform('transform.tfm'))``
+    (linear, the moving minimum outside) is ``moving_resampled``, to float32 rounding, edges included."""
+    import SimpleITK as sitk
+
+    if d == 2:
+        fixed, moving = itk_dir / "BrainProtonDensitySlice.png", itk_dir / "BrainProtonDensitySliceR10X13Y17.png"
+        written = tmp_path / "out" / "moving_resampled.tif"
+    else:
+        volume = sitk.ReadImage(str(itk_dir / "KmeansTest_T1UCharRaw.nii.gz"), sitk.sitkFloat32)[::2, ::2, :]
+        t = sitk.Euler3DTransform(volume.TransformContinuousIndexToPhysicalPoint([s / 2 for s in volume.GetSize()]),
+                                  0.05, -0.04, 0.08, (3.0, -2.0, 4.0))
+        fixed, moving = tmp_path / "fixed.nii.gz", tmp_path / "moving.nii.gz"
+        sitk.WriteImage(volume, str(fixed))
+        sitk.WriteImage(sitk.Resample(volume, volume, t.GetInverse(), sitk.sitkLinear, 0.0), str(moving))
+        written = tmp_path / "out" / "moving_resampled.nii.gz"
+    register_cli(capsys, fixed, moving, "--out", tmp_path / "out")
+    F, M = sitk.ReadImage(str(fixed), sitk.sitkFloat32), sitk.ReadImage(str(moving), sitk.sitkFloat32)
+    if d == 2:
+        F, M = (sitk.Extract(X, X.GetSize()[:2] + (0,), (0, 0, 0)) if X.GetDimension() == 3 else X for X in (F, M))
+    tfm = sitk.ReadTransform(str(tmp_path / "out" / "transform.tfm"))
+    minimum = float(sitk.GetArrayViewFromImage(M).min())
+    expected = sitk.GetArrayFromImage(sitk.Resample(M, F, tfm, sitk.sitkLinear, minimum, sitk.sitkFloat32))
+    np.testing.assert_allclose(sitk.GetArrayFromImage(sitk.ReadImage(str(written), sitk.sitkFloat32)), expected,
+                               atol=1e-3 * float(expected.max()))
