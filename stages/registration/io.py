@@ -8,7 +8,6 @@ the file (docs/registration.md, "Bad input")."""
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +22,7 @@ from topomatch.stages.registration.transform import RigidTransform
 
 def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
     """``arr`` as float64 after the checks every registration input needs (InputError: empty, non-numeric,
-    NaN/infinite, constant, or fewer than 4 pixels along an axis)."""
+    NaN/infinite, beyond 1e100 in magnitude, constant, or fewer than 4 pixels along an axis)."""
     if arr.size == 0 or 0 in arr.shape:
         raise InputError(path, f"image is empty (shape {arr.shape})")
     if not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
@@ -35,9 +34,9 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
     if bad.any():
         raise InputError(path, f"{int(bad.sum())} of {data.size} pixels are NaN or infinite; mask or fill them first")
     lo, hi = float(data.min()), float(data.max())
-    if not math.isfinite(hi - lo):
-        raise InputError(path, f"pixel values span {lo:g} to {hi:g}: more than double precision can subtract; rescale "
-                               f"the image")
+    if max(-lo, hi) > 1e100:  # squared and summed over the pixels (moments, variances): 1e302 gave NaN parameters
+        raise InputError(path, f"pixel values span {lo:g} to {hi:g}: beyond 1e100 their squares' sums overflow double "
+                               f"precision; rescale the image")
     if hi - lo <= 0:
         raise InputError(path, f"image is constant (every pixel is {lo:g}): it has no structure to register")
     if min(data.shape) < 4:

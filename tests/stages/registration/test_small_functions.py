@@ -115,7 +115,8 @@ def test_histogram_threads_follow_omp_num_threads_else_the_cpus_up_to_four(monke
 @pytest.mark.parametrize("bad, message", [
     (np.zeros((0, 5)), "empty"), (np.array([["a"] * 5] * 5), "not numbers"), (np.ones((5, 5)) * (1 + 1j), "complex"),
     (np.where(np.eye(5) > 0, np.nan, 1.0), "5 of 25 pixels are NaN"), (np.full((5, 5), 2.0), "constant"),
-    (np.arange(15.0).reshape(3, 5), "too small"), (np.array([[-1e308, 1e308] * 3] * 5), "double precision")])
+    (np.arange(15.0).reshape(3, 5), "too small"), (np.array([[-1e308, 1e308] * 3] * 5), "double precision"),
+    (np.arange(25.0).reshape(5, 5) * 1e300, "overflow double precision")])
 def test_check_pixels_names_the_file_and_the_problem(bad, message):
     from topomatch.pipeline.errors import InputError
     from topomatch.stages.registration.io import check_pixels
