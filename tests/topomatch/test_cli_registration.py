@@ -258,3 +258,20 @@ def test_moving_resampled_is_simpleitks_resampling_by_the_written_transform(caps
     expected = sitk.GetArrayFromImage(sitk.Resample(M, F, tfm, sitk.sitkLinear, minimum, sitk.sitkFloat32))
     np.testing.assert_allclose(sitk.GetArrayFromImage(sitk.ReadImage(str(written), sitk.sitkFloat32)), expected,
                                atol=1e-3 * float(expected.max()))
+
+
+def test_verbose_lists_the_outputs_and_debug_stays_ours(capsys, itk_dir, tmp_path):
+    """``-v`` names the registration's time and every file written; ``-vv`` adds topomatch's debug logging, not every
+    library's (matplotlib's font search filled 190 lines)."""
+    args = (itk_dir / "BrainProtonDensitySlice.png", itk_dir / "BrainProtonDensitySliceR10X13Y17.png", "--out",
+            tmp_path / "out")
+    _, _, err = register_cli(capsys, *args, "-v")
+    assert "register:" in err and all(f"output: {tmp_path / 'out' / name}" in err for name in (
+        "transform.tfm", "overlay.png", "registration.json"))
+    import subprocess
+    import sys
+
+    # a process of its own: pytest's log capture would hide what the root logger lets through
+    err = subprocess.run([sys.executable, "-m", "topomatch", "register", *map(str, args), "-vv"], capture_output=True,
+                         text=True, cwd=tmp_path).stderr
+    assert "output:" in err and "matplotlib" not in err and "PIL" not in err, err[-2000:]

@@ -126,7 +126,9 @@ def main(argv: list[str] | None = None) -> int:
     level = -1 if args.quiet else (args.verbose or 0)
     common.reset(level)
     logging.basicConfig(format="topomatch: %(levelname)s: %(name)s: %(message)s",
-                        level={-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO}.get(level, logging.DEBUG))
+                        level=logging.ERROR if level < 0 else logging.WARNING)  # other libraries: warnings only
+    logging.getLogger("topomatch").setLevel({-1: logging.ERROR, 0: logging.WARNING, 1: logging.INFO}.get(
+        level, logging.DEBUG))
     if command_line:  # not in a caller's process (a test recording warnings keeps Python's own display)
         warnings.showwarning = _show_warning
     try:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import argparse
 
-from topomatch.cli.common import command, input_path, path_argument, print_result
+from topomatch.cli.common import command, info, input_path, path_argument, print_result
 from topomatch.pipeline.cli_options import Option, add_options, add_set_option, given_options, set_options
 from topomatch.pipeline.errors import InputError, TopomatchError
 from topomatch.pipeline.files import check_writable_folder
@@ -79,6 +79,10 @@ def cmd_register(args: argparse.Namespace) -> int:
     keys = (("tx", "ty", "angle") if outcome.dimension == 2 else ("angles", "translation")) + (
         "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok", "reason", "method", "files")
     print_result(summary, as_json=args.json, keys=keys)
+    reg = outcome.registration
+    info(f"  register: {reg.seconds:.2f} s, {reg.iterations} iterations, {reg.evaluations} evaluations", level=1)
+    for path in summary.get("files", []):
+        info(f"  output: {path}", level=1)
     if unwritten is not None:
         raise unwritten
     if not outcome.ok:
