@@ -407,11 +407,11 @@ class _Run:
 def check_start(run: _Run, theta, value, stop) -> list[Flag]:
     """The optimiser could not start: no overlap at the start, or nothing to climb."""
     coarse = run.levels[0].objective
-    if stop in ("invalid_start", "flat_objective") or not math.isfinite(coarse(run.start)):
-        return [Flag("start", f"the optimiser could not start ({stop.replace('_', ' ') or 'no overlap'}): only "
+    if (why := stop if stop in ("invalid_start", "flat_objective") else "") or not math.isfinite(coarse(run.start)):
+        return [Flag("start", f"the optimiser could not start ({why.replace('_', ' ') or 'no overlap'}): only "
                               f"{coarse.overlap(run.start):.1%} of the fixed samples overlap the moving image at the "
-                              f"start ({run.params.transform.init}; min_overlap {run.params.metric.min_overlap:.0%}), "
-                              f"or the images carry no information")]
+                              f"start ({run.params.transform.init}; min_overlap {run.params.metric.min_overlap:.0%}; a "
+                              f"moving image much smaller than the fixed: swap them), or the images carry no information")]
     return []
 
 
