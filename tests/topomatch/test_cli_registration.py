@@ -275,3 +275,14 @@ def test_verbose_lists_the_outputs_and_debug_stays_ours(capsys, itk_dir, tmp_pat
     err = subprocess.run([sys.executable, "-m", "topomatch", "register", *map(str, args), "-vv"], capture_output=True,
                          text=True, cwd=tmp_path).stderr
     assert "output:" in err and "matplotlib" not in err and "PIL" not in err, err[-2000:]
+
+
+def test_a_flagged_pair_of_a_png_and_a_nifti_names_their_conventions(capsys, itk_dir, tmp_path):
+    """The same pixels as a NIfTI with nibabel's identity affine (RAS: a 180-degree turn from the PNG's pixel frame)
+    against the PNG: flagged, and the reason says the two formats place pixels differently."""
+    nib = pytest.importorskip("nibabel")
+    png = itk_dir / "BrainProtonDensitySlice.png"
+    data = np.asarray(PILImage.open(png), dtype=np.float32)
+    nib.save(nib.Nifti1Image(data.T[:, :, None], np.eye(4)), tmp_path / "same.nii.gz")
+    code, _, err = register_cli(capsys, tmp_path / "same.nii.gz", png)
+    assert code == 1 and "in pixel units with rows down" in err and "180 degrees" in err

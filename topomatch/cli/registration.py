@@ -62,6 +62,21 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object on stdout")
 
 
+def _mixed_conventions(fixed, moving) -> str:
+    """A hint when one input is a Pillow format (pixel units, rows down) and the other a medical one (its header's
+    physical frame): the same pixels need not lie in the same place (a NIfTI's identity affine is a 180-degree turn)."""
+    from pathlib import Path
+
+    from topomatch.stages.imaging.files import PILLOW_SUFFIXES
+
+    pillow = [not Path(p).is_dir() and Path(p).name.lower().endswith(PILLOW_SUFFIXES) for p in (fixed, moving)]
+    if pillow[0] == pillow[1]:
+        return ""
+    return (f" (note: {'the fixed' if pillow[0] else 'the moving'} image is a PNG/TIFF/JPEG/BMP in pixel units with "
+            f"rows down, the other places its pixels by its header, in millimetres: the same pixels in the two formats "
+            f"can look flipped or turned by 180 degrees; write both in one format, or copy the geometry)")
+
+
 def cmd_register(args: argparse.Namespace) -> int:
     from topomatch.registration import check_outputs_spare_inputs, register_with, write_registration_files
 
@@ -86,5 +101,5 @@ def cmd_register(args: argparse.Namespace) -> int:
     if unwritten is not None:
         raise unwritten
     if not outcome.ok:
-        raise RegistrationFlagged(f"registration flagged: {outcome.reason}")
+        raise RegistrationFlagged(f"registration flagged: {outcome.reason}{_mixed_conventions(args.fixed, args.moving)}")
     return 0
