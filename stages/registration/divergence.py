@@ -109,7 +109,7 @@ def jensen_tsallis_histogram(h: np.ndarray, alpha: float = 2.0, weights: Weights
     keep = rows > 0
     if not keep.any():
         return float("nan")
-    if alpha == 2.0 and weights == "histogram":  # the thesis's closed form, same value (tested)
+    if alpha == 2.0 and weights == "histogram":  # the thesis's closed form, sum h_ij^2/(N h_i.) - sum (h_.j/N)^2
         N = rows.sum()
         cols = h.sum(axis=0)
         q = np.einsum("ij,ij->i", h, h)
@@ -177,13 +177,3 @@ def similarity(h: np.ndarray, metric: Metric, *, alpha: float = 2.0, weights: We
     if metric == "tmi":
         return tsallis_mutual_information(h, alpha, tmi_form)
     raise ValueError(f"unknown metric {metric!r}; expected one of {', '.join(METRIC_NAMES)}")
-
-
-def jensen_tsallis_alpha2_identity(h: np.ndarray) -> float:
-    """The thesis's closed form of JT for ``a = 2`` and histogram weights (a check, not a shortcut):
-    ``sum_ij h_ij^2 / (N h_i.) - sum_j (h_.j / N)^2``, rows with ``h_i. = 0`` left out."""
-    h = np.asarray(h, dtype=np.float64)
-    N = h.sum()
-    rows = h.sum(axis=1)
-    keep = rows > 0
-    return float(np.sum(h[keep] ** 2 / (N * rows[keep, None])) - np.sum((h.sum(axis=0) / N) ** 2))
