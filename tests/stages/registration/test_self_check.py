@@ -349,3 +349,20 @@ def test_a_basin_only_the_start_search_finds_flags_and_leaves_the_estimate_as_it
     assert [f.check for f in on.flags] == [f.check for f in off.flags] + ["capture"] and "start_search" in on.reason
     np.testing.assert_array_equal(on.transform.parameters, off.transform.parameters)
     assert on.iterations == off.iterations and on.restarts == off.restarts == 0
+
+
+def test_an_optimiser_that_stops_short_of_an_optimum_is_flagged(pd_slice):
+    """A schedule of absurd steps (100 units: every step overshoots and is blocked) returns its start, 10 degrees
+    from the truth; one unit from it the finest measure is higher (``ascent`` > ``check.margin``): ``gain`` flags it.
+    The defaults' result on the same pair is a local optimum (every unit step lowers the measure)."""
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform
+
+    moving = moved(pd_slice, RigidTransform.euler2d(3.0, -4.0, 10.0, pd_slice.center))
+    stuck = register(pd_slice, moving, RegisterParams(schedule=[{"step": 100.0}]))
+    assert abs(stuck.transform.angles_deg[0] - 10.0) > 5 and "gain" in [f.check for f in stuck.flags]
+    assert stuck.measures["ascent"] > 0.005
+    good = register(pd_slice, moving)
+    assert good.ok and good.measures["ascent"] < 0
