@@ -451,15 +451,15 @@ def check_chance(run: _Run, theta, value, stop) -> list[Flag]:
 def check_gain(run: _Run, theta, value, stop) -> list[Flag]:
     """The optimiser did not climb: the result moved from the start but scores no better there, or one unit from it
     along some parameter (an angle: its arc at the RMS radius) the finest measure is higher by more than
-    ``check.margin`` of it (``ascent``; twenty-sixth round): it stopped short of an optimum."""
+    ``check.margin`` of it (``ascent``; twenty-sixth round): it stopped short of an optimum; or the measure is 0."""
     fine = run.levels[-1].objective
     start_value = fine(run.start)
     if run.distance(theta, run.start) > 0.5 * run.levels[-1].spacing and math.isfinite(start_value) \
             and not value > start_value:
         return [Flag("gain", f"the measure at the result ({value:.4g}) is no better than at the start "
                              f"({start_value:.4g})")]
-    if not (math.isfinite(value) and value > 0):
-        return []
+    if not (math.isfinite(value) and value > 0):  # 0: independent, e.g. a pair smoothed to constants (no information)
+        return [Flag("gain", "the measure is 0 at the result: the images carry no information there")] if value == 0 else []
     units = np.diag(np.r_[[1.0 / run.radius] * run.k, [1.0] * run.dim])
     ascent = run.measures["ascent"] = max((fine(theta + s * u) - value) / value for u in units for s in (-1.0, 1.0))
     if ascent <= run.params.check.margin:

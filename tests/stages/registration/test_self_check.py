@@ -366,3 +366,16 @@ def test_an_optimiser_that_stops_short_of_an_optimum_is_flagged(pd_slice):
     assert stuck.measures["ascent"] > 0.005
     good = register(pd_slice, moving)
     assert good.ok and good.measures["ascent"] < 0
+
+
+def test_a_pair_smoothed_to_constants_is_flagged(pd_slice):
+    """A schedule whose smoothing (1000 units) makes both images constant: the measure is 0 everywhere and the start
+    comes back; ``gain`` says the images carry no information there."""
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform
+
+    moving = moved(pd_slice, RigidTransform.euler2d(3.0, -4.0, 10.0, pd_slice.center))
+    flat = register(pd_slice, moving, RegisterParams(schedule=[{"smoothing": 1000.0}]))
+    assert flat.value == 0.0 and any(f.check == "gain" and "no information" in f.message for f in flat.flags)
