@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import Field, model_validator
+from pydantic import Field, FiniteFloat, model_validator
 
 from topomatch.pipeline.contract import Params, deep_merge
 
@@ -30,7 +30,8 @@ class MetricSpec(_Named):
 
     name: Literal["jt", "jr", "mi", "tmi"] = Field("jt", description="jt: Jensen-Tsallis (thesis), jr: Jensen-Renyi, "
                                                                    "mi: mutual information, tmi: Tsallis MI")
-    alpha: float = Field(2.0, gt=0, le=10, allow_inf_nan=False, description="entropy order of jt, jr, tmi (thesis: 2)")
+    alpha: float = Field(2.0, gt=0, le=10, allow_inf_nan=False, description="entropy order of jt, jr, tmi, in (0, 10] "
+                                                                           "(thesis: 2; mi ignores it)")
     weights: Literal["histogram", "uniform"] = Field("histogram", description="Jensen weights: reference histogram "
                                                                              "(thesis) or uniform")
     tmi_form: Literal["additive", "relative"] = Field("additive", description="Tsallis MI: pseudo-additive form or "
@@ -157,7 +158,7 @@ class CheckSpec(Params):
     search: bool = Field(True, description="coarse search: a better basin found from its best transforms flags the "
                                            "result (and, with retry, replaces it)")
     probes: int = Field(24, ge=4, description="2D: rotations over the full circle of the coarse search")
-    angles: list[float] = Field(default_factory=lambda: [-30.0, 30.0],
+    angles: list[FiniteFloat] = Field(default_factory=lambda: [-30.0, 30.0],
                                 description="3D: rotations of the coarse search about each axis (degrees), besides none")
     grid: int = Field(13, ge=1, description="translations per axis of the coarse search (over the search box)")
     min_content: float = Field(0.2, ge=0, le=1, allow_inf_nan=False,
