@@ -186,10 +186,13 @@ def register_with(fixed: Image | str | Path, moving: Image | str | Path,
                                metric.name, metric.alpha)
 
 
-def _to_uint8(data: np.ndarray, reference: np.ndarray) -> np.ndarray:
+def _png_pixels(data: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """``data`` as a PNG stores it: the moving image's own values when they are integers that 8 or 16 bits hold (a
+    16-bit PNG stays 16-bit), else scaled to 8 bits over the moving image's range."""
     lo, hi = float(reference.min()), float(reference.max())
-    if lo >= 0 and hi <= 255 and np.allclose(reference, np.round(reference)):
-        return np.clip(np.round(data), 0, 255).astype(np.uint8)
+    if lo >= 0 and hi <= 65535 and np.allclose(reference, np.round(reference)):
+        dtype, top = (np.uint8, 255) if hi <= 255 else (np.uint16, 65535)
+        return np.clip(np.round(data), 0, top).astype(dtype)
     return np.clip(np.round((data - lo) / (hi - lo) * 255), 0, 255).astype(np.uint8)
 
 
@@ -224,7 +227,7 @@ def check_outputs_spare_inputs(out: str | Path, *inputs: str | Path) -> None:
 
 def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> list[str]:
     """In ``out``: the moving image resampled onto the fixed grid, in the moving file's format
-    (``moving_resampled`` + ``.png`` 8-bit for Pillow formats, with a float32 ``.tif`` beside it; the file's own
+    (``moving_resampled`` + ``.png`` 8-bit, or 16-bit for a 16-bit moving image, for Pillow formats, with a float32 ``.tif`` beside it; the file's own
     format with the fixed geometry and the moving pixel type for NIfTI / MetaImage / NRRD; ``.nii.gz`` for
     DICOM or in-memory images), ``transform.tfm`` (SimpleITK's Euler2D / Euler3D transform of the result:
     ``sitk.ReadTransform`` reads it, ``sitk.Resample(moving, fixed, T)`` gives the resampling),
@@ -276,7 +279,7 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     if suffix == ".png":
         from PIL import Image as PILImage
 
-        for name, array, fmt in (("moving_resampled.png", _to_uint8(resampled, moving.data), "PNG"),
+        for name, array, fmt in (("moving_resampled.png", _png_pixels(resampled, moving.data), "PNG"),
                                  ("moving_resampled.tif", resampled.astype(np.float32), "TIFF")):
             buf = io.BytesIO()
             PILImage.fromarray(array).save(buf, format=fmt)

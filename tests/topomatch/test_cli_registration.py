@@ -286,3 +286,17 @@ def test_a_flagged_pair_of_a_png_and_a_nifti_names_their_conventions(capsys, itk
     nib.save(nib.Nifti1Image(data.T[:, :, None], np.eye(4)), tmp_path / "same.nii.gz")
     code, _, err = register_cli(capsys, tmp_path / "same.nii.gz", png)
     assert code == 1 and "in pixel units with rows down" in err and "180 degrees" in err
+
+
+def test_a_16_bit_png_gives_a_16_bit_resampled_png(capsys, itk_dir, tmp_path):
+    """A 16-bit moving PNG (values up to 60,000): ``moving_resampled.png`` keeps 16 bits and its values are the float
+    ``.tif``'s, rounded (it used to be rescaled to 8 bits)."""
+    fixed = np.asarray(PILImage.open(itk_dir / "BrainProtonDensitySlice.png"), dtype=np.float64)
+    moving = np.asarray(PILImage.open(itk_dir / "BrainProtonDensitySliceR10X13Y17.png"), dtype=np.float64)
+    for name, data in (("fixed16.png", fixed), ("moving16.png", moving)):
+        PILImage.fromarray(np.round(data * 60000 / 255).astype(np.uint16)).save(tmp_path / name)
+    code, _, _ = register_cli(capsys, tmp_path / "fixed16.png", tmp_path / "moving16.png", "--out", tmp_path / "out")
+    png = np.asarray(PILImage.open(tmp_path / "out" / "moving_resampled.png"))
+    tif = np.asarray(PILImage.open(tmp_path / "out" / "moving_resampled.tif"))
+    assert code == 0 and png.dtype == np.uint16 and png.max() > 255
+    np.testing.assert_allclose(png, tif, atol=1.0)  # the .tif holds float32: a half may round the other way
