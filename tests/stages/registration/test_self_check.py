@@ -379,3 +379,17 @@ def test_a_pair_smoothed_to_constants_is_flagged(pd_slice):
     moving = moved(pd_slice, RigidTransform.euler2d(3.0, -4.0, 10.0, pd_slice.center))
     flat = register(pd_slice, moving, RegisterParams(schedule=[{"smoothing": 1000.0}]))
     assert flat.value == 0.0 and any(f.check == "gain" and "no information" in f.message for f in flat.flags)
+
+
+def test_stability_flags_a_result_another_sample_moves_farther_than_its_limit(pd_slice):
+    """The finest level run again on another sample of the images never ends exactly where the first did: with
+    ``check.stability`` at 1e-9 units the test fires and records that distance; at 0 (the 2D default) it is off."""
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform
+
+    moving = moved(pd_slice, RigidTransform.euler2d(3.0, -4.0, 10.0, pd_slice.center))
+    strict = register(pd_slice, moving, RegisterParams(check={"stability": 1e-9}))
+    assert [f.check for f in strict.flags] == ["stability"] and 0 < strict.measures["stability"] < 0.5
+    assert "stability" not in register(pd_slice, moving).measures
