@@ -393,3 +393,22 @@ def test_stability_flags_a_result_another_sample_moves_farther_than_its_limit(pd
     strict = register(pd_slice, moving, RegisterParams(check={"stability": 1e-9}))
     assert [f.check for f in strict.flags] == ["stability"] and 0 < strict.measures["stability"] < 0.5
     assert "stability" not in register(pd_slice, moving).measures
+
+
+def test_a_start_without_overlap_says_so_and_suggests_swapping(pd_slice):
+    """A 32 x 32 moving patch of a 181 x 217 fixed slice: 2 % of the fixed samples overlap it at the start. The
+    ``start`` flag names the overlap (not the optimiser's stop reason) and suggests the swap that works."""
+    from topomatch.stages.registration.image import Image
+    from topomatch.stages.registration.register import register
+
+    patch = Image(pd_slice.data[90:122, 70:102], name="patch")
+    start = [f for f in register(pd_slice, patch).flags if f.check == "start"]
+    assert start and "(no overlap)" in start[0].message and "swap them" in start[0].message
+
+
+def test_check_angles_refuse_nan():
+    from topomatch.pipeline.errors import ConfigError
+    from topomatch.stages.registration.params import RegisterParams
+
+    with pytest.raises(ConfigError, match="finite"):
+        RegisterParams.parse({"check": {"angles": [float("nan")]}}, "register")
