@@ -12,10 +12,10 @@ Two 2D images (or slices: ``fixed_slice`` / ``moving_slice``) give the three par
 
 from __future__ import annotations
 
-import errno
 import io
 import json
 import math
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -261,17 +261,11 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
         if path.resolve() in inputs:  # --out next to the inputs: never write over one of them
             raise InputError(path, "is one of the registration's input files: choose another --out folder")
         try:
-            if data is not None:
-                atomic_write_bytes(path, data)
-            else:  # a writer that takes a path (SimpleITK): the same all-or-nothing rename, the error naming `path`
-                if path.is_dir():
-                    raise IsADirectoryError(errno.EISDIR, "is a folder, not a file", str(path))
-                tmp = path.with_name(f".tmp-{path.name}")
-                try:
-                    write(tmp)
-                    tmp.replace(path)
-                finally:
-                    tmp.unlink(missing_ok=True)
+            if write is not None:  # a writer that takes a path (SimpleITK): its bytes, then written as the others are
+                with tempfile.TemporaryDirectory() as scratch:
+                    write(Path(scratch) / path.name)
+                    data = (Path(scratch) / path.name).read_bytes()
+            atomic_write_bytes(path, data)
             written.append(path)
         except OSError as exc:  # the other files are still written; the first failure is raised at the end
             failures.append(exc)

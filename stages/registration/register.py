@@ -460,8 +460,8 @@ def check_gain(run: _Run, theta, value, stop) -> list[Flag]:
                              f"({start_value:.4g})")]
     if not (math.isfinite(value) and value > 0):  # 0: independent, e.g. a pair smoothed to constants (no information)
         return [Flag("gain", "the measure is 0 at the result: the images carry no information there")] if value == 0 else []
-    units = np.diag(np.r_[[1.0 / run.radius] * run.k, [1.0] * run.dim])
-    ascent = run.measures["ascent"] = max((fine(theta + s * u) - value) / value for u in units for s in (-1.0, 1.0))
+    ascent = run.measures["ascent"] = max((fine(theta + s * u) - value) / value for u in np.diag(run.scales)
+                                          for s in (-1.0, 1.0))  # one unit: run.scales, as check_bounds
     if ascent <= run.params.check.margin:
         return []
     return [Flag("gain", f"the measure rises by {ascent:.1%} one unit from the result (margin {run.params.check.margin:g}"
