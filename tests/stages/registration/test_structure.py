@@ -365,3 +365,31 @@ def test_a_tight_silhouette_is_outline_only_by_its_residual_and_the_test_can_be_
     assert run.structures["residual_moving"] < params.check.min_residual and run.outline_only
     off = params.model_copy(update={"check": params.check.model_copy(update={"min_residual": 0.0})})
     assert not _Run(fixed, moving, off, None, None).outline_only
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_interior_structure_equals_its_definition_computed_with_scipy(pd_slice, d):
+    """On a real image (the PD slice; the KmeansTest T1 volume), the value is its definition computed with
+    scipy.ndimage: the copy block-averaged by 2 along axes of 48 pixels or more, its object (``object_mask``,
+    tested on its own), the outline band (the object grown by 2 px, a square box, and its background grown by 2),
+    the interior (the object less its background grown by 3), and the mean gradient magnitude of the copy blurred
+    by 1 px (truncated at 3) inside over its mean on the band."""
+    from tests_paths import ITK_DIR
+    from topomatch.stages.registration.io import read_image
+    from topomatch.stages.registration.structure import analysed_copy, object_mask
+
+    image = pd_slice if d == 2 else read_image(ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz")
+    small = analysed_copy(image)
+    factors = [2 if n >= 48 else 1 for n in image.data.shape]
+    cropped = image.data[tuple(slice(0, n - n % f) for n, f in zip(image.data.shape, factors))]
+    by_hand = cropped.reshape([x for n, f in zip(cropped.shape, factors) for x in (n // f, f)]).mean(
+        axis=tuple(range(1, 2 * d, 2)))
+    np.testing.assert_allclose(small.data, by_hand, rtol=1e-12)
+    obj = object_mask(small)
+    box = lambda r: np.ones((2 * r + 1,) * d, dtype=bool)  # noqa: E731
+    band = ndimage.binary_dilation(obj, box(2)) & ndimage.binary_dilation(~obj, box(2))
+    inside = ~ndimage.binary_dilation(~obj, box(3))
+    magnitude = np.sqrt(sum(g ** 2 for g in np.gradient(ndimage.gaussian_filter(small.data, 1.0, mode="nearest",
+                                                                                 truncate=3.0))))
+    assert band.sum() > 100 and inside.sum() > 100
+    assert interior_structure(image) == pytest.approx(magnitude[inside].mean() / magnitude[band].mean(), rel=1e-9)
