@@ -369,3 +369,17 @@ def test_3d_outline_gap_of_a_shifted_ball_and_its_flag():
     run = make_run(coarse, coarse)
     assert ask(reg.check_outline, run, np.r_[0.0, 0.0, 0.0, 24.0, 0.0, 0.0]) == ["outline"]
     assert run.measures["outline_gap"] > run.params.check.outline_gap
+
+
+def test_3d_overlap_bound_flags_a_result_whose_measure_rises_past_the_accepted_overlap(t1_run):
+    """Off by default in 3D, asked here: the truth overlaps 13 %; at the first transform from it toward the start
+    that overlaps 27 %, the measure with half the overlap accepted climbs to less than 25 % overlap."""
+    t1 = t1_run.fixed
+    extent = np.asarray(t1.size) * np.asarray(t1.spacing)
+    truth = np.r_[0.0, 0.0, 0.2, 0.7 * extent[0], 0.25 * extent[1], 0.0]
+    run = make_run(t1, moved(t1, RigidTransform(tuple(truth), tuple(t1.center))), overlap_bound=True)
+    coarse = run.levels[0].objective
+    assert coarse.overlap(truth) < 0.5 * run.params.metric.min_overlap + 0.01
+    near = next(t for t in (truth + s * (run.start - truth) for s in np.linspace(0, 1, 21)) if coarse.overlap(t) >= 0.27)
+    assert ask(reg.check_overlap_bound, run, near) == ["overlap_bound"]
+    assert ask(reg.check_overlap_bound, make_run(t1_run.fixed, t1_run.moving, overlap_bound=True), TRUTH3) == []
