@@ -42,7 +42,7 @@ _API = {
     "QueryResult": "topomatch.retrieval", "Evaluation": "topomatch.retrieval",
     "read_image": "topomatch.registration", "register": "topomatch.registration",
     "RegistrationOutcome": "topomatch.registration", "write_registration_files": "topomatch.registration",
-    "read_volume": "topomatch.registration",
+    "read_volume": "topomatch.registration", "Image": "topomatch.registration",
     "run_config": "topomatch.experiments", "load_config": "topomatch.experiments",
     "bundled_configs": "topomatch.experiments", "data_path": "topomatch.pipeline.paths",
     "METHODS": "topomatch.stages.retrieval.catalogue",

@@ -29,6 +29,8 @@ from topomatch.pipeline.errors import InputError, StageError
 from topomatch.pipeline.files import atomic_write_bytes
 from topomatch.pipeline.item import run_stages
 from topomatch.stages.registration.image import Image
+from topomatch.stages.imaging.files import check_geometry
+from topomatch.stages.registration.io import check_pixels
 from topomatch.stages.registration.io import read_image as _read_image
 from topomatch.stages.registration.io import read_volume  # noqa: F401 (the API)
 from topomatch.stages.registration.params import RegisterParams
@@ -86,21 +88,42 @@ class RegistrationOutcome:
         raise AttributeError(f"{type(self).__name__} has no field {name!r}")
 
     def to_dict(self) -> dict[str, Any]:
-        """The JSON fields as a plain dict."""
+        """The JSON fields as a plain dict (strict JSON: a value that is not finite is None)."""
         reg, t = self.registration, self.registration.transform
         out = {"fixed": self.fixed, "moving": self.moving, "dimension": t.dim, "convention": CONVENTION[t.dim],
-               "names": list(t.names), "parameters": [round(v, 9) for v in t.parameters],
-               "angles": [round(a, 6) for a in t.angles_deg], "translation": [round(float(v), 6) for v in t.translation],
-               "center": [round(float(c), 6) for c in t.center],
-               "matrix": [[round(float(v), 9) for v in row] for row in t.matrix()],
-               "metric": self.metric, "alpha": reg.measures.get("outline_alpha", self.alpha), "method": reg.method, "objective": reg.value,
-               "iterations": reg.iterations, "evaluations": reg.evaluations, "overlap": round(reg.overlap, 4),
-               "seconds": round(reg.seconds, 4), "ok": reg.ok, "reason": reg.reason,
+               "names": list(t.names), "parameters": [json_number(v, 12) for v in t.parameters],
+               "angles": [json_number(a) for a in t.angles_deg], "translation": [json_number(v) for v in t.translation],
+               "center": [json_number(c) for c in t.center],
+               "matrix": [[json_number(v, 12) for v in row] for row in t.matrix()],
+               "metric": self.metric, "alpha": reg.measures.get("outline_alpha", self.alpha), "method": reg.method,
+               "objective": json_number(reg.value, 12), "iterations": reg.iterations, "evaluations": reg.evaluations,
+               "overlap": round(reg.overlap, 4), "seconds": round(reg.seconds, 4), "ok": reg.ok, "reason": reg.reason,
                "flags": [f.check for f in reg.flags],
-               "measures": {k: (round(float(v), 6) if math.isfinite(float(v)) else None) for k, v in reg.measures.items()}}
+               "measures": {k: json_number(v, 6) for k, v in reg.measures.items()}}
         if t.dim == 2:
-            out.update({"tx": round(t.tx, 6), "ty": round(t.ty, 6), "angle": round(t.angle, 6)})
+            out.update({"tx": json_number(t.tx), "ty": json_number(t.ty), "angle": json_number(t.angle)})
         return out
+
+
+def json_number(value, digits: int = 10) -> float | None:
+    """``value`` to ``digits`` significant digits (a translation in metres keeps its precision as one in
+    micrometres does), None when it is not finite (strict JSON has no NaN or infinity)."""
+    value = float(value)
+    return float(f"{value:.{digits}g}") if math.isfinite(value) else None
+
+
+def _input(value: Any, role: str) -> Image | Path:
+    """A registration input: an :class:`Image`, whose pixels and geometry get the checks a file's get, or a path;
+    InputError naming the role for anything else (an array: wrap it in an Image, with its spacing)."""
+    if isinstance(value, Image):
+        label = f"the {role} image" + (f" {value.name!r}" if value.name else "")
+        check_pixels(value.data, label)
+        check_geometry(label, value.spacing, value.origin, value.direction)
+        return value
+    if isinstance(value, (str, Path)):
+        return Path(value)
+    hint = (": wrap an array as topomatch.Image(array, spacing=...)" if isinstance(value, np.ndarray) else "")
+    raise InputError(None, f"the {role} image must be a file path or an Image, not {type(value).__name__}{hint}")
 
 
 def read_image(path: str | Path, *, slice: int | None = None) -> Image:
@@ -155,14 +178,16 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
              "fixed_slice": fixed_slice, "moving_slice": moving_slice}
     overrides: dict[str, dict[str, Any]] = {}
     for keyword, value in given.items():
-        if value is not None:
-            set_path(overrides, REGISTER_OPTIONS[keyword].path, value, keyword)
+        if value is not None:  # a numpy scalar is its Python number (the options are YAML scalars)
+            set_path(overrides, REGISTER_OPTIONS[keyword].path, value.item() if isinstance(value, np.generic)
+                     else value, keyword)
     return register_with(fixed, moving, overrides)
 
 
 def register_with(fixed: Image | str | Path, moving: Image | str | Path,
                   overrides: dict[str, dict[str, Any]]) -> RegistrationOutcome:
     """:func:`register` with the options as ``{stage: {param: value}}`` (what the CLI collects)."""
+    fixed, moving = _input(fixed, "fixed"), _input(moving, "moving")
     if isinstance(fixed, Image) != isinstance(moving, Image):
         raise InputError(None, "give both images as files or both as Image objects")
     if isinstance(fixed, Image):
@@ -173,7 +198,7 @@ def register_with(fixed: Image | str | Path, moving: Image | str | Path,
         names = (fixed.name, moving.name)
     else:
         result = run_stages(chain_with(["load_pair", "register"], overrides),
-                            paths={"fixed_path": Path(fixed), "moving_path": Path(moving)}, label=f"{fixed}|{moving}")
+                            paths={"fixed_path": fixed, "moving_path": moving}, label=f"{fixed}|{moving}")
         names = (str(fixed), str(moving))
     if not result.ok:
         if result.error_stage == "load_pair":
@@ -296,7 +321,9 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     fig.savefig(buf, format="png", dpi=100 if fixed.dim == 3 else 110, bbox_inches="tight")
     plt.close(fig)
     save(out / "overlay.png", buf.getvalue())
-    history = {k: np.asarray(v).tolist() for k, v in reg.history.items()}
+    history = {k: [json_number(x, 12) for x in np.asarray(v, dtype=np.float64).ravel()] if np.asarray(v).ndim == 1
+               else [[json_number(x, 12) for x in row] for row in np.asarray(v, dtype=np.float64)]
+               for k, v in reg.history.items()}
     save(out / "registration.json", json.dumps({**outcome.to_dict(), "history": history}, default=str).encode())
     if failures:
         raise failures[0]

@@ -233,14 +233,17 @@ def _gzip_length(path: Path, enough: int) -> int:
     return total
 
 
-def _check_geometry(path: Path, spacing, origin, direction) -> None:
-    """Refuse spacings that are not finite and positive, and a non-finite origin or a singular direction."""
+def check_geometry(path: str | Path, spacing, origin, direction) -> None:
+    """Refuse spacings outside 1e-6 to 1e6 mm, an origin that is not finite or beyond 1e9 mm (there double precision
+    keeps less than a micrometre), and a direction that is not a rotation; ``path`` names the image (a file, or an
+    image in memory)."""
     bad = [f"{s:g}" for s in spacing if not (math.isfinite(s) and 1e-6 <= s <= 1e6)]
     if bad:
         raise InputError(path, f"pixel spacing {', '.join(f'{s:g}' for s in spacing)} mm: every spacing must be a "
-                               f"finite number from 1e-6 to 1e6 mm; fix the header")
-    if not all(math.isfinite(o) for o in origin):
-        raise InputError(path, f"origin {tuple(origin)} is not finite; fix the header")
+                               f"finite number from 1e-6 to 1e6 mm; fix the header (or the Image's spacing)")
+    if not all(math.isfinite(o) and abs(o) <= 1e9 for o in origin):
+        raise InputError(path, f"origin {tuple(float(o) for o in origin)} is not finite or lies beyond 1e9 mm; fix "
+                               f"the header (or the Image's origin)")
     d = np.asarray(direction, dtype=float).reshape(len(spacing), len(spacing))
     if not (np.all(np.isfinite(d)) and np.allclose(d.T @ d, np.eye(len(d)), atol=1e-3)):
         raise InputError(path, "direction matrix is not a rotation (non-finite, singular or sheared); fix the header")
@@ -376,7 +379,7 @@ def read_array(path: str | Path) -> tuple[np.ndarray, tuple[float, ...], tuple[f
             if fmt not in (".tif", ".tiff"):
                 raise  # TIFF variants Pillow cannot decode go to SimpleITK
     arr, spacing, origin, direction = _read_nifti(path) if fmt in (".nii", ".nii.gz") else _read_with_sitk(path)
-    _check_geometry(path, spacing[:arr.ndim], origin[:arr.ndim], np.asarray(direction).reshape(
+    check_geometry(path, spacing[:arr.ndim], origin[:arr.ndim], np.asarray(direction).reshape(
         int(round(len(np.ravel(direction)) ** 0.5)), -1)[:arr.ndim, :arr.ndim])
     d = arr.ndim
     keep = [a for a in range(d) if arr.shape[d - 1 - a] > 1]  # ITK axes of more than one pixel

@@ -193,3 +193,55 @@ def test_a_script_without_a_main_guard_can_use_the_worker_pool(tmp_path):
     out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split("\n")[:2] == ["start", "indexed 3"]
+
+
+def _pd_pair():
+    return (topomatch.read_image(ITK_DIR / "BrainProtonDensitySlice.png"),
+            topomatch.read_image(ITK_DIR / "BrainProtonDensitySliceR10X13Y17.png"))
+
+
+@pytest.mark.parametrize("case, message", [
+    ("array", "the fixed image must be a file path or an Image, not ndarray: wrap an array as topomatch.Image"),
+    ("list", "the fixed image must be a file path or an Image, not list"),
+    ("nan", "the moving image 'holes': 4873 of 56797 pixels are NaN or infinite"),
+    ("empty", "the fixed image: image is empty (shape (0, 0))"),
+    ("thin", "the fixed image: image is too small to register (shape (3, 50)"),
+    ("origin", "the fixed image: origin (1e+20, 1e+20) is not finite or lies beyond 1e9 mm"),
+    ("spacing", "the moving image: pixel spacing 1e-07, 1e-07 mm: every spacing must be a finite number from 1e-6"),
+])
+def test_register_checks_images_in_memory_as_it_checks_files(case, message):
+    """An Image gets the checks a file gets (NaN, empty, too small, absurd geometry), and anything that is neither a
+    path nor an Image is refused by name, instead of an internal error from inside the registration."""
+    from topomatch.pipeline.errors import InputError
+
+    f, m = _pd_pair()
+    rows = np.arange(150.0)[:, None] + np.arange(50.0)
+    fixed, moving = {
+        "array": (f.data, m.data), "list": ([1, 2], m),
+        "nan": (f, topomatch.Image(np.where(m.data > 200, np.nan, m.data), name="holes")),
+        "empty": (topomatch.Image(np.zeros((0, 0)), name=""), m),
+        "thin": (topomatch.Image(rows[:3], name=""), topomatch.Image(rows[:3])),
+        "origin": (topomatch.Image(f.data, origin=(1e20, 1e20), name=""), m),
+        "spacing": (f, topomatch.Image(m.data, spacing=(1e-7, 1e-7), name="")),
+    }[case]
+    with pytest.raises(InputError) as info:
+        topomatch.register(fixed, moving)
+    assert message in str(info.value)
+
+
+def test_register_keeps_precision_in_small_units_and_writes_strict_json(tmp_path):
+    """At 1e-6 mm pixels the translation keeps its significant digits (it was rounded to 6 decimals: 0); numpy
+    scalars are accepted as options; an undefined measure (no overlap) is null, never -Infinity, in the result and
+    in registration.json."""
+    f, m = _pd_pair()
+    micro = topomatch.register(topomatch.Image(f.data, spacing=(1e-6, 1e-6)),
+                               topomatch.Image(m.data, spacing=(1e-6, 1e-6)), seed=np.int64(0), alpha=np.float64(2))
+    unit = topomatch.register(f, m)
+    assert micro.ok and unit.ok
+    np.testing.assert_allclose(np.asarray(micro.translation) * 1e6, unit.translation, atol=0.05)
+    np.testing.assert_allclose(micro.parameters[1:], np.asarray(micro.translation), rtol=1e-9)
+    crop = topomatch.register(f, topomatch.Image(m.data[100:120, 100:120], name="crop"))
+    assert crop.to_dict()["objective"] is None and not crop.ok
+    json.dumps(crop.to_dict(), allow_nan=False)
+    topomatch.write_registration_files(crop, tmp_path)
+    json.loads((tmp_path / "registration.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
