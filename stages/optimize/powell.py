@@ -14,7 +14,7 @@ from typing import Callable
 
 import numpy as np
 
-from topomatch.stages.optimize.spsa import OptimizeResult
+from topomatch.stages.optimize.spsa import OptimizeResult, callback_stops
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ def powell_maximize(f: Callable[[np.ndarray], float], theta0, settings: PowellSe
         value = -neg(zk)
         rows.append((zk * scales, value, float(np.linalg.norm(zk - last[0])), False))
         last[0] = zk.copy()
-        if callback is not None and callback(len(rows) - 1, zk * scales, value):
+        if callback is not None and callback_stops(callback(len(rows) - 1, zk * scales, value)):
             stopped[0] = True
             return True
         return False

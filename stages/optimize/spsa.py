@@ -113,6 +113,15 @@ class OptimizeResult:
     history: dict[str, np.ndarray] = field(default_factory=dict)
 
 
+def callback_stops(answer) -> bool:
+    """Whether an iteration callback's answer stops the optimiser: True (or a non-zero integer) stops, False or None
+    goes on; anything else is a TypeError (an array's truth value would be numpy's ambiguity error, deep inside the
+    run)."""
+    if answer is None or isinstance(answer, (bool, int, np.bool_, np.integer)):
+        return bool(answer)
+    raise TypeError(f"an iteration callback must return True (stop), False or None, not {type(answer).__name__}")
+
+
 def spsa_maximize(f: Callable[[np.ndarray], float], theta0, settings: SPSASettings, *, rng: np.random.Generator,
                   scales=None, lower=None, upper=None,
                   callback: Callable[[int, np.ndarray, float], bool | None] | None = None) -> OptimizeResult:
@@ -257,7 +266,7 @@ def spsa_maximize(f: Callable[[np.ndarray], float], theta0, settings: SPSASettin
         if len(tail) > max(1, s.average_last):
             tail.pop(0)
         recent.append(step_len)
-        if callback is not None and callback(k, z * scales, y):
+        if callback is not None and callback_stops(callback(k, z * scales, y)):
             stop = "callback"
             break
         if s.tol > 0 and len(recent) >= s.window and max(recent[-s.window:]) < s.tol:

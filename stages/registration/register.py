@@ -333,9 +333,8 @@ class _Run:
     def distance(self, a: np.ndarray, b: np.ndarray) -> float:
         """Approximate RMS displacement between two transforms: the translation and each angle's arc at the RMS
         radius (angles wrapped)."""
-        da = (np.asarray(a[: self.k]) - np.asarray(b[: self.k]) + math.pi) % (2 * math.pi) - math.pi
-        return float(math.hypot(np.linalg.norm(np.asarray(a[self.k:]) - np.asarray(b[self.k:])),
-                                np.linalg.norm(da) * self.radius))
+        da = (np.subtract(a[: self.k], b[: self.k]) + math.pi) % (2 * math.pi) - math.pi
+        return float(math.hypot(np.linalg.norm(np.subtract(a[self.k:], b[self.k:])), np.linalg.norm(da) * self.radius))
 
     def refine(self, start: np.ndarray, objective: Objective | None = None) -> tuple[np.ndarray, float]:
         """``check.refine`` iterations of the first level (or of ``objective`` there) from ``start``, any angle."""
@@ -735,16 +734,16 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     ``params`` fields not set take the dimension's defaults (:func:`~.params.for_dimension`); ``fixed_mask`` (bool,
     shape of ``fixed.data``): the fixed pixels to sample instead of ``params.sampling``; ``callback(level, k, theta,
     value)`` after every optimiser iteration, True stopping the level. StageError: images of different dimensionality, a
-    mask that selects nothing or has another shape, a failed self-check with ``on_failure='error'``."""
+    mask not of finite numbers, of another shape or selecting nothing, a failed self-check (``on_failure='error'``)."""
     t0 = time.perf_counter()
     if fixed.dim != moving.dim:
         raise StageError(f"cannot register a {moving.dim}D moving image to a {fixed.dim}D fixed image")
-    params = for_dimension(params, fixed.dim)
+    params = for_dimension(RegisterParams.model_validate(params), fixed.dim)  # a dict of its fields too
     if fixed_mask is not None:
-        fixed_mask = np.asarray(fixed_mask, dtype=bool)
-        if fixed_mask.shape != fixed.shape or not fixed_mask.any():
-            raise StageError(f"the fixed mask (shape {fixed_mask.shape}, {int(fixed_mask.sum())} pixels) must select "
-                             f"pixels of the fixed image (shape {fixed.shape})")
+        given, fixed_mask = np.asarray(fixed_mask), np.asarray(fixed_mask, dtype=bool)  # non-zero: sampled
+        if fixed_mask.shape != fixed.shape or not fixed_mask.any() or not (given.dtype.kind in "biuf" and np.isfinite(given).all()):
+            raise StageError(f"the fixed mask (shape {fixed_mask.shape}, {given.dtype}, {int(fixed_mask.sum())} pixels) must be "
+                             f"finite numbers or bools, non-zero on pixels of the fixed image (shape {fixed.shape})")
     unit = min(1.0, float(np.max(np.asarray(fixed.size) * fixed.spacing)) / SMALL_FIELD)
     if unit < 1.0:  # a small field: registered in working units, the answer (and what callback sees) scaled back
         scale = np.r_[[1.0] * n_angles(fixed.dim), [unit] * fixed.dim]

@@ -113,3 +113,19 @@ def test_powell_handles_invalid_points():
 
     res = powell_maximize(f, np.zeros(3), PowellSettings(xtol=1e-4), lower=[-10, -10, -10], upper=[10, 10, 10])
     assert res.theta[0] <= 2.0 + 1e-9 and math.isfinite(res.value)
+
+
+@pytest.mark.parametrize("answer, stops", [(None, False), (False, False), (True, True), (np.True_, True), (1, True),
+                                           (0, False)])
+def test_callback_answers_that_stop_or_go_on(answer, stops):
+    from topomatch.stages.optimize.spsa import callback_stops
+
+    assert callback_stops(answer) is stops
+
+
+@pytest.mark.parametrize("answer", [np.array([True, False]), "stop", 0.5, [True]])
+def test_a_callback_answer_that_is_not_a_bool_is_a_type_error_naming_the_contract(answer):
+    from topomatch.stages.optimize.spsa import callback_stops
+
+    with pytest.raises(TypeError, match="must return True \\(stop\\), False or None, not"):
+        callback_stops(answer)

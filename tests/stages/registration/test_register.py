@@ -175,6 +175,19 @@ def test_inputs_are_checked(pd_slice, small_t1):
         register(pd_slice, small_t1)
     with pytest.raises(StageError, match="mask"):
         register(pd_slice, pd_slice, fixed_mask=np.zeros(pd_slice.shape, bool))
+    for bad in (np.full(pd_slice.shape, np.nan), np.full(pd_slice.shape, "no")):  # each once read as all True
+        with pytest.raises(StageError, match="must be finite numbers or bools, non-zero on pixels"):
+            register(pd_slice, pd_slice, fixed_mask=bad)
+
+
+def test_a_mask_of_0_and_255_and_params_as_a_dict_are_accepted(pd_slice):
+    """A mask as image files store it (0 / 255) selects its non-zero pixels; ``params`` as a dict of the fields is
+    validated as RegisterParams (it raised AttributeError: 'dict' object has no attribute 'model_dump')."""
+    mask = np.zeros(pd_slice.shape, np.uint8)
+    mask[40:180, 30:150] = 255
+    as_bool = register(pd_slice, pd_slice, {"seed": 3}, fixed_mask=mask > 0)
+    as_bytes = register(pd_slice, pd_slice, RegisterParams(seed=3), fixed_mask=mask)
+    assert as_bytes.transform.parameters == as_bool.transform.parameters and as_bytes.ok
 
 
 def test_params_are_validated():
