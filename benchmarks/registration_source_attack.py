@@ -33,6 +33,16 @@ at 0.1 mm pixels (``itk-micro``: 18 x 22 mm, a small-animal scale), MNI axial se
 are, spacing and origin relabelled (the corpus's masks, classes and tissue fractions kept; no thick slices). Declared with the twenty-fifth round (a small field registered in working
 units) before the round's code ran on anything but ``sources``' ``mr-small`` cases, and run once with it.
 
+``--split large-fov`` (seeds 42xxx): fields of view far larger than every corpus source's (at most 256 mm), where a
+hostile user's pass found the PD slice pair with 20-100 mm pixels (a 4-22 m field) flagged with a wrong rotation: the
+ITK T1 slice at 20 mm pixels (``itk-macro``: 3.6 x 4.3 m), MNI axial sections at 5 mm (``mni-macro``: about 1 m, where
+the code before the twenty-seventh round still worked on that pair), ITK's KmeansTest head at 40 x 40 x 60 mm voxels
+(``kmeans-macro``: 5.1 x 5.1 x 3.7 m) and nibabel's ``anatomical.nii`` at 16 mm voxels (``anatomical-macro``: 0.4 x
+0.66 x 0.5 m, just above the round's 512 mm): pixels as they are, spacing and origin relabelled, the case's translation scaled by the same factor (a
+misalignment of as many pixels as the corpus draws), 3D correct within the factor's mm (1 mm on the corpus's grid).
+Declared with the twenty-seventh round (a large field registered in working units) before the round's code ran on
+anything but the hostile user's PD pair, and run once before and once after it.
+
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_source_attack.py --dims 2 \\
         --json benchmarks/results/registration_source_attack_2d.json
 """
@@ -74,8 +84,13 @@ SMALL_SOURCES = {2: [("mr-small", 10), ("itk-micro", 10), ("mni-micro", 10)],
                  3: [("anatomical-micro", 12), ("kmeans-micro", 12)]}
 SMALL_SEEDS = {("mr-small", 2): 39602, ("itk-micro", 2): 39612, ("mni-micro", 2): 39622,
                ("anatomical-micro", 3): 39303, ("kmeans-micro", 3): 39203}
-MICRO = {"itk-micro": 0.1, "mni-micro": 0.25, "anatomical-micro": 0.25, "kmeans-micro": 0.1}
-"""The factor each relabelled source's spacing and origin are multiplied by."""
+LARGE_SPLIT = "large-fov"
+LARGE_SOURCES = {2: [("itk-macro", 10), ("mni-macro", 10)], 3: [("anatomical-macro", 12), ("kmeans-macro", 12)]}
+LARGE_SEEDS = {("itk-macro", 2): 42612, ("mni-macro", 2): 42622, ("anatomical-macro", 3): 42303,
+               ("kmeans-macro", 3): 42203}
+MICRO = {"itk-micro": 0.1, "mni-micro": 0.25, "anatomical-micro": 0.25, "kmeans-micro": 0.1,
+         "itk-macro": 20.0, "mni-macro": 5.0, "anatomical-macro": 8.0, "kmeans-macro": 20.0}
+"""The factor each relabelled source's spacing and origin are multiplied by (``-macro``: the large-fov split's)."""
 SEEDS = {("dipy-coronal", 2): 38102, ("dipy-b0", 2): 38202, ("piesno", 2): 38302, ("aniso", 2): 38402,
          ("epi", 2): 38502, ("mr-small", 2): 38602, ("ct-small", 2): 38702, ("aniso", 3): 38403, ("epi", 3): 38503}
 WHEEL_DIR: list[Path] = []
@@ -135,12 +150,13 @@ def volume(source: str) -> Image:
 @lru_cache(maxsize=None)
 def micro_fields(source: str, index: int) -> corpus.Fields:
     """The corpus's fields of a relabelled source (tissue fractions, masks and classes as the corpus makes them)."""
-    if source == "itk-micro":
+    base = source.rsplit("-", 1)[0]
+    if base == "itk":
         fields = corpus.itk_source()
-    elif source == "mni-micro":
+    elif base == "mni":
         fields = corpus.mni_section("axial", {"position": 0.2 + 0.6 * (index % 10) / 9, "spacing": 1, "frame": "as-is"})
     else:
-        fields = corpus.volume_source(source.removesuffix("-micro"))
+        fields = corpus.volume_source(base)
     return fields.on(micro(fields.grid, MICRO[source]), fields.maps)
 
 
@@ -164,15 +180,22 @@ def register_split() -> None:
     """Add the split and its sources to the corpus module (this process only)."""
     if SPLIT in corpus.SPLITS:
         return
-    corpus.SPLITS.update({SPLIT: SOURCES, SMALL_SPLIT: SMALL_SOURCES})
-    corpus.KINDS.update({SPLIT: corpus.ELEVEN_KINDS, SMALL_SPLIT: corpus.ELEVEN_KINDS})
+    corpus.SPLITS.update({SPLIT: SOURCES, SMALL_SPLIT: SMALL_SOURCES, LARGE_SPLIT: LARGE_SOURCES})
+    corpus.KINDS.update({SPLIT: corpus.ELEVEN_KINDS, SMALL_SPLIT: corpus.ELEVEN_KINDS, LARGE_SPLIT: corpus.ELEVEN_KINDS})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
     corpus.SEEDS.update({(SMALL_SPLIT, source, dim): seed for (source, dim), seed in SMALL_SEEDS.items()})
-    corpus.SPLIT_ORDER.update({SPLIT: max(corpus.SPLIT_ORDER.values()) + 100, SMALL_SPLIT: 1e9})
-    fields = corpus.source_fields
+    corpus.SEEDS.update({(LARGE_SPLIT, source, dim): seed for (source, dim), seed in LARGE_SEEDS.items()})
+    corpus.SPLIT_ORDER.update({SPLIT: max(corpus.SPLIT_ORDER.values()) + 100, SMALL_SPLIT: 1e9, LARGE_SPLIT: 2e9})
+    fields, score = corpus.source_fields, corpus.score
+
+    def scored(case: corpus.Case, fixed: Image, method: str, result: corpus.Result) -> dict:
+        row = score(case, fixed, method, result)  # a large field's 3D voxels: correct within the factor's mm
+        return {**row, "unit": MICRO[case.spec.source]} if case.spec.split == LARGE_SPLIT and case.spec.dim == 3 else row
+
+    corpus.score = scored
 
     def source_fields(spec: corpus.CaseSpec) -> corpus.Fields:
-        if spec.split not in (SPLIT, SMALL_SPLIT):
+        if spec.split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT):
             return fields(spec)
         if spec.source in MICRO:
             return micro_fields(spec.source, spec.index if spec.dim == 2 else 0)
@@ -185,11 +208,11 @@ def register_split() -> None:
 
     def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
         spec = plan(split, source, dim, index, place)
-        if split not in (SPLIT, SMALL_SPLIT):
+        if split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT):
             return spec
         grid = volume(source) if dim == 3 else section(source, index)
         extent = float(min(np.asarray(grid.size) * np.asarray(grid.spacing)))
-        scale = min(1.0, MAX_TRANSLATION_FRACTION * extent / corpus.MAX_TRANSLATION)
+        scale = MICRO[source] if split == LARGE_SPLIT else min(1.0, MAX_TRANSLATION_FRACTION * extent / corpus.MAX_TRANSLATION)
         k = len(spec.truth) - dim  # no 4 mm slices on a field of a few millimetres
         return dataclasses.replace(spec, truth=spec.truth[:k] + tuple(scale * t for t in spec.truth[k:]),
                                    thick=spec.thick and split != SMALL_SPLIT,
