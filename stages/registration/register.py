@@ -33,10 +33,10 @@ MIN_LEVEL_VOXELS = 8
 MIN_LEVEL_SAMPLES = 2000
 """Fewest fixed samples of a level's measure; a coarser level with fewer is measured on the grid of the first
 finer level with enough, smoothed (its schedule entry is kept)."""
-SMALL_FIELD = 64.0
+SMALL_FIELD, LARGE_FIELD = 64.0, 512.0
 """Physical units: the defaults' lengths (levels, steps, start grid, margin, the self-check's distances) were chosen on
-fields of view at least this large; a fixed grid whose largest extent is smaller is registered in working units of
-that extent over this (``measures['unit']``; twenty-fifth round) and the result is scaled back."""
+fields of view of 82-388; a fixed grid whose largest extent E is below the first (twenty-fifth round) or above the
+second (twenty-seventh) is registered in working units of E over it (``measures['unit']``), the result scaled back."""
 SMALL_FOV_SIGMA = 0.3
 """Gaussian sigma, as a fraction of the level's spacing, that stands in for its block average on a finer grid (a
 block of width s has a standard deviation of s / sqrt(12) = 0.29 s)."""
@@ -744,8 +744,8 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         if fixed_mask.shape != fixed.shape or not fixed_mask.any() or not (given.dtype.kind in "biuf" and np.isfinite(given).all()):
             raise StageError(f"the fixed mask (shape {fixed_mask.shape}, {given.dtype}, {int(fixed_mask.sum())} pixels) must be "
                              f"finite numbers or bools, non-zero on pixels of the fixed image (shape {fixed.shape})")
-    unit = min(1.0, float(np.max(np.asarray(fixed.size) * fixed.spacing)) / SMALL_FIELD)
-    if unit < 1.0:  # a small field: registered in working units, the answer (and what callback sees) scaled back
+    unit = (extent := float(np.max(np.asarray(fixed.size) * fixed.spacing))) / min(max(extent, SMALL_FIELD), LARGE_FIELD)
+    if unit != 1.0:  # a small or large field: registered in working units, the answer (and what callback sees) scaled back
         scale = np.r_[[1.0] * n_angles(fixed.dim), [unit] * fixed.dim]
         fixed, moving = fixed.scaled(1.0 / unit), moving.scaled(1.0 / unit)
         if callback is not None:
@@ -762,7 +762,7 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         flags = self_check(run, theta, value, stop)
     keys = ("level", "theta", "value", "step", "blocked")
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
-    if unit < 1.0:
+    if unit != 1.0:
         history["theta"] = history["theta"] * scale if run.history else np.zeros(0)
         run.measures["unit"] = unit
         flags = [Flag(f.check, f"{f.message} (lengths in working units of {unit:.4g})") for f in flags]

@@ -285,6 +285,22 @@ def test_a_small_field_is_registered_in_working_units(pd_slice):
     np.testing.assert_allclose(2 * small.translation, large.translation, atol=0.01)
 
 
+@pytest.mark.parametrize("spacing", [50.0, 100.0])
+def test_a_large_field_is_registered_in_working_units(pd_slice, spacing):
+    """The bundled PD pair (10 deg, (13, 17) pixels) with its pixels relabelled 50 and 100 mm (11 and 22 m fields,
+    larger than LARGE_FIELD): one answer in pixels whatever the scale, the 1 mm one within 0.05 px, ok, in working
+    units of the largest extent over LARGE_FIELD. Registered in millimetres (before the twenty-seventh round) the
+    rotation drifted (3.8 deg at 50 mm) and the result was flagged by ``agreement``."""
+    from topomatch.stages.registration.register import LARGE_FIELD
+
+    moving = read_image(ITK_DIR / "BrainProtonDensitySliceR10X13Y17.png")
+    unit = register(pd_slice, moving)
+    big = register(Image(pd_slice.data, (spacing, spacing)), Image(moving.data, (spacing, spacing)))
+    assert big.ok and big.measures["unit"] == pytest.approx(217 * spacing / LARGE_FIELD)
+    assert big.transform.angles_deg[0] == pytest.approx(unit.transform.angles_deg[0], abs=0.02)
+    np.testing.assert_allclose(np.asarray(big.transform.translation) / spacing, unit.transform.translation, atol=0.05)
+
+
 @pytest.mark.parametrize("corner", [(60, 60), (80, 50), (100, 90)])
 @pytest.mark.parametrize("angle, tx, ty", [(15.0, 1.0, -1.0), (-12.0, -2.0, 1.5)])
 def test_a_20_mm_field_is_recovered(pd_slice, corner, angle, tx, ty):
