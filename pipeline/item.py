@@ -21,6 +21,7 @@ import dataclasses
 import functools
 import hashlib
 import json
+import os
 import time
 import traceback
 import typing
@@ -278,5 +279,5 @@ def _unusable(spec: StageSpec, value: Any) -> str | None:
 
 def _name_input(message: str, input_path: str) -> str:
     """Make sure an error message names the input file (a pair labelled ``a|b`` is named by either)."""
-    named = not input_path or any(part and part in message for part in input_path.split("|"))
+    named = not input_path or any(part and os.path.normpath(part) in message for part in input_path.split("|"))
     return message if named else f"{input_path}: {message}"

@@ -258,7 +258,12 @@ def _dicom_files(folder: Path) -> list[str]:
     """The file names of the one DICOM series in ``folder`` (InputError for none or several)."""
     import SimpleITK as sitk
 
-    ids = sitk.ImageSeriesReader.GetGDCMSeriesIDs(str(folder))
+    shown = sitk.ProcessObject.GetGlobalWarningDisplay()
+    sitk.ProcessObject.SetGlobalWarningDisplay(False)  # GDCM's "No Series were found" on stderr: the error says it
+    try:
+        ids = sitk.ImageSeriesReader.GetGDCMSeriesIDs(str(folder))
+    finally:
+        sitk.ProcessObject.SetGlobalWarningDisplay(shown)
     if not ids:
         raise InputError(folder, "is a folder without a DICOM series; give a DICOM series folder or an image file")
     if len(ids) > 1:
@@ -509,10 +514,14 @@ def _check_nifti_header(path: Path, header) -> None:
         q = [float(header[k]) for k in ("quatern_b", "quatern_c", "quatern_d", "qoffset_x", "qoffset_y", "qoffset_z")]
         if not all(math.isfinite(v) for v in q):
             raise InputError(path, f"the qform (quaternion and offset {q}) is not finite: a damaged header")
+        if max(abs(v) for v in q[3:]) > 1e9:  # ITK would report "orthonormal direction cosines", naming another field
+            raise InputError(path, f"the qform's origin (qoffset {q[3:]}) lies beyond 1e9 mm: a damaged header")
     if int(header["sform_code"]) > 0:
         srow = np.array([header["srow_x"], header["srow_y"], header["srow_z"]], dtype=float)
         if not np.all(np.isfinite(srow)) or abs(np.linalg.det(srow[:, :3])) < 1e-12:
             raise InputError(path, "the sform (srow_x/y/z) is not finite or its 3 x 3 part is singular: a damaged header")
+        if np.max(np.abs(srow[:, 3])) > 1e9:
+            raise InputError(path, f"the sform's origin ({srow[:, 3].tolist()}) lies beyond 1e9 mm: a damaged header")
     if int(header["qform_code"]) == 0 and int(header["sform_code"]) == 0:
         warnings.warn(f"{path}: the NIfTI header has neither a qform nor an sform, so its orientation is unknown; it "
                       f"is read as ITK reads it (voxel axes = scanner axes, origin 0, spacing {pixdim} mm): the "

@@ -711,6 +711,8 @@ def volume_cases() -> list[Case]:
         ("dicom-missing-slice", {"series": _dicom_series(skip=30)}, r"series: .*not evenly spaced: 6 mm .* 3 mm apart", 1),
         ("nii-vox-offset-zero", {"m.nii": _volume_nii(vox_offset=0)}, r"m\.nii: its data offset \(vox_offset 0\) lies inside", 1),
         ("nii-qoffset-nan", {"m.nii": _nifti_edit(qform_code=1, qoffset_x=float("nan"))}, r"m\.nii: the qform .* not finite", 1),
+        ("nii-qoffset-1e20", {"m.nii": _nifti_edit(qform_code=1, qoffset_x=1e20)},
+         r"m\.nii: the qform's origin \(qoffset .*\) lies beyond 1e9 mm", 1),
         ("nii-tiny-pixdim", {"m.nii": _volume_nii(pixdim=(1e-30, 1e-30, 1e-30))}, r"m\.nii: pixel spacing 1e-30", 1),
         ("nii-gz-not-gzip", {"m.nii.gz": _png(16, 16)}, r"m\.nii\.gz: cannot read image \(BadGzipFile", 1),
         ("nii-gz-size-claim", {"m.nii.gz": _nifti_gz_claim((464, 464, 464))}, r"m\.nii\.gz: truncated: .* inflates to fewer", 1),

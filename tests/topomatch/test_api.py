@@ -245,3 +245,17 @@ def test_register_keeps_precision_in_small_units_and_writes_strict_json(tmp_path
     json.dumps(crop.to_dict(), allow_nan=False)
     topomatch.write_registration_files(crop, tmp_path)
     json.loads((tmp_path / "registration.json").read_text(), parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+
+
+def test_a_folder_without_a_dicom_series_is_named_once_and_quietly(tmp_path, capfd):
+    """A folder given with a trailing slash was named twice (the pair's label, then the reader's message), and GDCM
+    printed a warning of its own to stderr."""
+    import shutil
+
+    from topomatch.pipeline.errors import InputError
+
+    shutil.copy(ITK_DIR / "BrainT1Slice.png", tmp_path)
+    with pytest.raises(InputError) as info:
+        topomatch.register(f"{tmp_path}/", ITK_DIR / "BrainT1Slice.png")
+    assert str(info.value) == f"{tmp_path}: is a folder without a DICOM series; give a DICOM series folder or an image file"
+    assert "No Series were found" not in capfd.readouterr().err
