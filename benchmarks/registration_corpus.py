@@ -194,7 +194,11 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   release as it is.
 - ``final26``: declared with the twenty-eighth round (the outline test's drop counts only where the coarser levels'
   other samples show it too), the design of ``final25``, fresh seeds 43xxx (42xxx: the large-fov attack's), run once
-  with the round's code if the tune side passes its rule, else with the code before it.
+  with the round's code if the tune side passes its rule, else with the code before it (it failed: run with the
+  code before it, d2b7873).
+- ``final27``: declared with the twenty-ninth round (the outline test's drop flags only where its mean over the
+  coarser levels' other samples is positive: the twenty-eighth round's sign, not its size), the design of ``final26``,
+  fresh seeds 44xxx, run once with the round's code if the tune side passes its rule, else with the code before it.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -278,7 +282,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 27)},  # final7 to final26: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 28)},  # final7 to final27: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -300,7 +304,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 27)},  # final8 to final26
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 28)},  # final8 to final27
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -401,6 +405,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final26", "mni", 3): 43103, ("final26", "mni15", 3): 43703, ("final26", "kmeans", 3): 43203,
          ("final26", "anatomical", 3): 43303, ("final26", "mni-axial", 2): 43102, ("final26", "mni-coronal", 2): 43402,
          ("final26", "mni-sagittal", 2): 43502, ("final26", "itk", 2): 43602,
+         ("final27", "mni", 3): 44103, ("final27", "mni15", 3): 44703, ("final27", "kmeans", 3): 44203,
+         ("final27", "anatomical", 3): 44303, ("final27", "mni-axial", 2): 44102, ("final27", "mni-coronal", 2): 44402,
+         ("final27", "mni-sagittal", 2): 44502, ("final27", "itk", 2): 44602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -417,7 +424,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
