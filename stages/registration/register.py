@@ -37,7 +37,7 @@ SMALL_FIELD, LARGE_FIELD = 64.0, 512.0
 """Physical units: the defaults' lengths (levels, steps, start grid, margin, the self-check's distances) were chosen on
 fields of view of 82-388; a fixed grid whose largest extent E is below the first (twenty-fifth round) or above the
 second (twenty-seventh) is registered in working units of E over it (``measures['unit']``), the result scaled back."""
-DROP_SAMPLES = 8  # the outline test's drop: its mean over this many other samples of the coarser levels (28th round)
+DROP_SAMPLES = 8  # the outline test's drop must be positive on average over this many other samples (29th round)
 SMALL_FOV_SIGMA = 0.3
 """Gaussian sigma, as a fraction of the level's spacing, that stands in for its block average on a finer grid (a
 block of width s has a standard deviation of s / sqrt(12) = 0.29 s)."""
@@ -567,7 +567,7 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
 def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     """The pair is outline-only (``run.outline_only``: a mask, a silhouette) and its outline does not pin the result
     down: the outlines lie more than ``check.outline_gap`` apart at the result, a coarser level's measure fell from its
-    end to the result by more than ``check.outline_drop`` on average over other samples (twenty-eighth round), or the
+    end to the result by more than ``check.outline_drop``, and on average over other samples (twenty-ninth round), or the
     grid's border or the other image's view at the result cuts away more of the outline-only image's object than
     ``check.min_outline_view`` leaves (:func:`~.structure.outline_in_view`). A pair passing all three is accepted."""
     c = run.params.check
@@ -585,14 +585,15 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
         run.measures["outline_view"] = view
     gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, at)
     drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
-    if drop > c.outline_drop:  # its mean over other samples of the levels: the drop of one sample's noise is not one
-        drop = run.measures["outline_drop"] = float(np.mean([max((d for _, d in run.drops(theta, run.params.seed + 7919 * k)),
-                                                                 default=0.0) for k in range(2, 2 + DROP_SAMPLES)]))
+    if drop > c.outline_drop:  # a drop whose mean over other samples of the levels is not positive is the sample's
+        run.measures["outline_drop"] = float(np.mean([max((d for _, d in run.drops(theta, run.params.seed + 7919 * k)),
+                                                          default=0.0) for k in range(2, 2 + DROP_SAMPLES)]))
+        drop = drop if run.measures["outline_drop"] > 0 else 0.0
     why = ([f"the outlines lie {gap:.2f} units apart at the result (outline_gap {c.outline_gap:g}): they do not "
             f"correspond there" if math.isfinite(gap) else "the outlines cannot be compared at the result"]
            if not gap <= c.outline_gap else []) + \
-          ([f"the finest level left the optimum a coarser level found (its measure {drop:.1%} lower there over "
-            f"{DROP_SAMPLES} other samples; outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else []) + \
+          ([f"the finest level left the optimum a coarser level found (its measure {drop:.1%} lower there, lower on "
+            f"{DROP_SAMPLES} other samples too; outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else []) + \
           ([f"only {view:.0%} of the {role} image's object boundary is outline that both images see, the rest is cut "
             f"by a grid's border (min_outline_view {c.min_outline_view:.0%})"] if view < c.min_outline_view else [])
     if not why:
