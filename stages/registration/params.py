@@ -195,8 +195,8 @@ class CheckSpec(Params):
                                        "sees at the result (a cropped partner's border cuts it too)")
     outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
                                 description="such a pair is flagged when a coarser level's measure is lower at the "
-                                            "result than at its own end by more than this fraction (the "
-                                            "consistency measure): its finer levels left the optimum it found")
+                                            "result than at its own end by more than this fraction, and lower on "
+                                            "average over 8 other samples: its finer levels left the optimum it found")
     min_prominence: float = Field(6.0, ge=0, allow_inf_nan=False,
                                   description="flag a result less than this many median absolute deviations above "
                                               "the coarse search's median")
