@@ -177,8 +177,7 @@ class _Run:
         reach = float(extent.max() + np.max(np.asarray(moving.size) * np.asarray(moving.spacing)))  # overlap's limit
         self.max_translation = min(b.max_translation or 0.5 * float(extent.min()), reach)
         a = math.radians(b.max_angle)
-        self.lower = np.r_[[-a] * self.k, self.start[self.k:] - self.max_translation]
-        self.upper = np.r_[[a] * self.k, self.start[self.k:] + self.max_translation]
+        self.lower, self.upper = (np.r_[[s * a] * self.k, self.start[self.k:] + s * self.max_translation] for s in (-1.0, 1.0))
         self.history: list[dict[str, np.ndarray]] = []
         self.ends: list[np.ndarray] = []
         self._grid: GridSearch | None = None
@@ -200,8 +199,7 @@ class _Run:
     def _levels_count(self) -> int | None:
         """The fewer distinct intensities of the two images when at most ``metric.discrete_levels`` (a label map, a
         thresholded mask: measured as an outline-only pair is, not flagged as one), else None."""
-        limit = self.params.metric.discrete_levels
-        if limit <= 0:
+        if (limit := self.params.metric.discrete_levels) <= 0:
             return None
         count = min(distinct_levels(image, limit) for image in (self.fixed, self.moving))
         return count if count <= limit else None
@@ -421,10 +419,9 @@ def check_start(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_overlap(run: _Run, theta, value, stop) -> list[Flag]:
     """The measure is undefined at the result: too little overlap."""
-    if math.isfinite(value):
-        return []
-    return [Flag("overlap", f"only {run.levels[-1].objective.overlap(theta):.1%} of the fixed samples overlap the "
-                            f"moving image at the result (min_overlap {run.params.metric.min_overlap:.0%})")]
+    return [] if math.isfinite(value) else [Flag("overlap", f"only {run.levels[-1].objective.overlap(theta):.1%} of the "
+                                                 f"fixed samples overlap the moving image at the result (min_overlap "
+                                                 f"{run.params.metric.min_overlap:.0%})")]
 
 
 def check_bounds(run: _Run, theta, value, stop) -> list[Flag]:
@@ -517,8 +514,7 @@ def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
     """The result is not pinned down to ``check.stability``: the finest level run again from it on another sample
     of the same images (another subset, another jitter) ends farther away (a broad or flat optimum: a silhouette
     whose outline hardly constrains the rotation, an undetermined direction)."""
-    limit = run.params.check.stability
-    if limit <= 0:
+    if (limit := run.params.check.stability) <= 0:
         return []
     li, fine = len(run.levels) - 1, run.levels[-1]
     other = fine.objective.on(run.histogram(fine.spec, fine.images, fine.spec.samples, run.params.seed + 7919))
@@ -558,10 +554,9 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
     if not (c := run.params.check).search:
         return []
     content = run.measures["content"] = run.search_images().content_overlap(theta)
-    if content < c.min_content:
-        return [Flag("content", f"only {content:.1%} of the fixed content (Otsu foreground) lands on the moving image's"
-                                f" content at the result (min_content {c.min_content:.0%}): too little shared content")]
-    return []
+    return [Flag("content", f"only {content:.1%} of the fixed content (Otsu foreground) lands on the moving image's "
+                            f"content at the result (min_content {c.min_content:.0%}): too little shared content")
+            ] if content < c.min_content else []
 
 
 def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
@@ -619,8 +614,7 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
     """Some combination of the parameters is undetermined (:func:`~topomatch.stages.registration.search.flatness`
     on a copy of the images scaled to the fixed content, 6 of its pixels from the result, angles as arcs at the
     content's RMS radius)."""
-    threshold = run.params.check.min_flatness
-    if threshold <= 0:
+    if (threshold := run.params.check.min_flatness) <= 0:
         return []
     images = run.search_images(content=True)
     radius = rms_radius(run.fixed, foreground_mask(run.fixed))
@@ -641,9 +635,9 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
 def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     """Another basin is better (:func:`_better_basin`): found by the grid's ``check.candidates`` best transforms
     (adopted with ``check.retry``), else by :meth:`_Run.shortlisted`, adopted only on a pair measured at order 1
-    (thirteenth round; on a mask read as an image, adopting a basin the grid ranked low added silent errors), else, on
-    a pair read as an image that no start search began (``check.start_search``, twenty-second round), by the 3D start
-    search's end, which only flags (a stream of its own, no history: the estimate is as without it)."""
+    (thirteenth round; on a mask read as an image, adopting a basin the grid ranked low added silent errors); a fixed mask
+    sampled over every pixel, adopted where higher at full resolution (thirtieth round); on a pair read as an image that no
+    start search began (``check.start_search``), the 3D start search's end, which only flags (own stream, no history)."""
     if not (c := run.params.check).search:
         return []
     probes = run.candidates(theta)
@@ -651,6 +645,14 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     if not flags and c.shortlist > c.candidates:
         more = [p for p in run.shortlisted(theta) if not any(np.array_equal(p, q) for q in probes)]
         flags = _better_basin(run, theta, value, more, adopt=run.outline_measure)
+    if run.mask is not None and any(k.endswith("_fixed") for k, *_ in _below_outline_thresholds(run)):
+        whole, saved = _Run(run.fixed, run.moving, run.params, None, None), run.ends  # a fixed mask: every pixel (30th)
+        end, end_stop = run.schedule_from(whole.schedule_from(whole.start)[0])
+        better_ends, run.ends = run.ends, saved
+        best = (fine := run.levels[-1].objective)(theta if run.better is None else run.better[0])
+        if fine(end) > best + c.margin * abs(best) and run.distance(end, theta) >= 2.0 * run.levels[0].spacing:
+            run.better, flags = (end, end_stop, better_ends), flags + [Flag("capture", f"sampled over every fixed pixel, "
+                f"it ends at {describe(run.at(end))}, {fine(end):.4g} > {best:.4g} at full resolution: a local optimum")]
     if flags or run.outline_measure or run.params.start.steps or not c.start_search:
         return flags
     rng, n, run.rng = run.rng, len(run.history), np.random.default_rng(run.params.seed + 104729)
@@ -761,8 +763,8 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         theta, stop, run.ends = run.better
         value = fine(theta)
         flags = self_check(run, theta, value, stop)
-    keys = ("level", "theta", "value", "step", "blocked")
-    history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0) for k in keys}
+    history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0)
+               for k in ("level", "theta", "value", "step", "blocked")}
     if unit != 1.0:
         history["theta"] = history["theta"] * scale if run.history else np.zeros(0)
         run.measures["unit"] = unit
