@@ -52,6 +52,14 @@ class Params(BaseModel):
         return self.model_dump(mode="json")
 
 
+def _python_scalar(value: Any) -> Any:
+    """A numpy scalar as its Python number (an API option computed with numpy: ``seed=np.int64(3)``); anything else
+    that JSON cannot hold is refused."""
+    if getattr(value, "shape", None) == () and hasattr(value, "item"):
+        return value.item()
+    raise TypeError(f"Object of type {type(value).__name__} is not JSON serializable")
+
+
 def validate_json_strict(model: type[BaseModel], data: Any, where: str) -> Any:
     """Validate plain YAML data against a pydantic model in strict JSON mode.
 
@@ -60,7 +68,7 @@ def validate_json_strict(model: type[BaseModel], data: Any, where: str) -> Any:
     problem as ``path: message, got value``.
     """
     try:
-        text = json.dumps(data, allow_nan=True)
+        text = json.dumps(data, allow_nan=True, default=_python_scalar)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"{where}: values must be plain YAML scalars, lists and mappings ({exc})") from None
     try:

@@ -99,7 +99,7 @@ class RegistrationOutcome:
                "objective": json_number(reg.value, 12), "iterations": reg.iterations, "evaluations": reg.evaluations,
                "overlap": round(reg.overlap, 4), "seconds": round(reg.seconds, 4), "ok": reg.ok, "reason": reg.reason,
                "flags": [f.check for f in reg.flags],
-               "measures": {k: json_number(v, 6) for k, v in reg.measures.items()}}
+               "measures": {k: json_number(v) for k, v in reg.measures.items()}}
         if t.dim == 2:
             out.update({"tx": json_number(t.tx), "ty": json_number(t.ty), "angle": json_number(t.angle)})
         return out
@@ -110,6 +110,12 @@ def json_number(value, digits: int = 10) -> float | None:
     micrometres does), None when it is not finite (strict JSON has no NaN or infinity)."""
     value = float(value)
     return float(f"{value:.{digits}g}") if math.isfinite(value) else None
+
+
+def strict_lists(values) -> list:
+    """An array as nested lists, full precision, a float that is not finite as None (strict JSON)."""
+    a = np.asarray(values)
+    return np.where(np.isfinite(a), a, None).tolist() if a.dtype.kind == "f" else a.tolist()
 
 
 def _input(value: Any, role: str) -> Image | Path:
@@ -178,9 +184,8 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
              "fixed_slice": fixed_slice, "moving_slice": moving_slice}
     overrides: dict[str, dict[str, Any]] = {}
     for keyword, value in given.items():
-        if value is not None:  # a numpy scalar is its Python number (the options are YAML scalars)
-            set_path(overrides, REGISTER_OPTIONS[keyword].path, value.item() if isinstance(value, np.generic)
-                     else value, keyword)
+        if value is not None:
+            set_path(overrides, REGISTER_OPTIONS[keyword].path, value, keyword)
     return register_with(fixed, moving, overrides)
 
 
@@ -204,7 +209,7 @@ def register_with(fixed: Image | str | Path, moving: Image | str | Path,
         if result.error_stage == "load_pair":
             raise InputError(None, result.error or "cannot read the images")
         raise StageError(result.error or "registration failed")
-    metric = RegisterParams.model_validate(overrides.get("register", {})).metric
+    metric = RegisterParams.parse(overrides.get("register", {}), "register").metric
     return RegistrationOutcome(names[0], names[1], result.final("registration"),
                                result.final("fixed") if not isinstance(fixed, Image) else fixed,
                                result.final("moving") if not isinstance(moving, Image) else moving,
@@ -321,9 +326,7 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     fig.savefig(buf, format="png", dpi=100 if fixed.dim == 3 else 110, bbox_inches="tight")
     plt.close(fig)
     save(out / "overlay.png", buf.getvalue())
-    history = {k: [json_number(x, 12) for x in np.asarray(v, dtype=np.float64).ravel()] if np.asarray(v).ndim == 1
-               else [[json_number(x, 12) for x in row] for row in np.asarray(v, dtype=np.float64)]
-               for k, v in reg.history.items()}
+    history = {k: strict_lists(v) for k, v in reg.history.items()}
     save(out / "registration.json", json.dumps({**outcome.to_dict(), "history": history}, default=str).encode())
     if failures:
         raise failures[0]

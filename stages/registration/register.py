@@ -140,9 +140,8 @@ is compared with ``check.min_<name>`` and is off at 0."""
 
 def _below_outline_thresholds(run: "_Run") -> list[tuple[str, float, str, float]]:
     """(measure key, value, test, threshold) of each recorded outline-only measure below its threshold."""
-    limits = {key: (test, getattr(run.params.check, f"min_{test}")) for key in run.structures
-              for test in [key.partition("_")[0]]}
-    return [(key, value, *limits[key]) for key, value in run.structures.items() if value < limits[key][1]]
+    tests = [(key, value, key.partition("_")[0]) for key, value in run.structures.items()]
+    return [(key, value, test, limit) for key, value, test in tests if value < (limit := getattr(run.params.check, f"min_{test}"))]
 
 
 @dataclass(frozen=True)
@@ -646,8 +645,9 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
         more = [p for p in run.shortlisted(theta) if not any(np.array_equal(p, q) for q in probes)]
         flags = _better_basin(run, theta, value, more, adopt=run.outline_measure)
     if run.mask is not None and any(k.endswith("_fixed") for k, *_ in _below_outline_thresholds(run)):
-        whole, saved = _Run(run.fixed, run.moving, run.params, None, None), run.ends  # a fixed mask: every pixel (30th)
-        end, end_stop = run.schedule_from(whole.schedule_from(whole.start)[0])
+        if getattr(run, "whole_end", None) is None:  # a fixed mask sampled over every pixel (30th round), once a run
+            run.whole_end = (whole := _Run(run.fixed, run.moving, run.params, None, None)).schedule_from(whole.start)[0]
+        saved, (end, end_stop) = run.ends, run.schedule_from(run.whole_end)
         better_ends, run.ends = run.ends, saved
         best = (fine := run.levels[-1].objective)(theta if run.better is None else run.better[0])
         if fine(end) > best + c.margin * abs(best) and run.distance(end, theta) >= 2.0 * run.levels[0].spacing:

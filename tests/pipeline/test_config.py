@@ -199,3 +199,16 @@ def test_the_scheduler_address_comes_from_the_config_then_the_environment(small_
     monkeypatch.delenv("DASK_SCHEDULER_ADDRESS")
     assert ExecutorConfig(kind="dask").scheduler() == (None, "")
     assert build_experiment(small_config).raw.executor.workers == 2
+
+
+def test_numpy_scalars_are_their_python_numbers_and_other_objects_are_refused():
+    """An option computed with numpy (``seed=np.int64(3)`` in any API call) validates as its Python number; an
+    object JSON cannot hold is still refused as not a plain YAML value."""
+    import numpy as np
+
+    from topomatch.stages.registration.params import RegisterParams
+
+    parsed = RegisterParams.parse({"seed": np.int64(3), "metric": {"alpha": np.float32(1.5)}}, "register")
+    assert parsed.seed == 3 and parsed.metric.alpha == 1.5
+    with pytest.raises(ConfigError, match="plain YAML scalars"):
+        RegisterParams.parse({"seed": object()}, "register")
