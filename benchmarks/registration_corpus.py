@@ -203,6 +203,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   every fixed pixel as a capture probe, adopted where the default finest measure is higher at its end), the design of
   ``final27``, fresh seeds 45xxx, run once with the round's code if the tune side passes its rule, else with the code
   before it.
+- ``final29``: declared on 2026-12-06 (third session) before a session whose changes were to leave every result
+  bit-identical (the command's start-up and where the time goes), the design of ``final28``, fresh seeds 46xxx, run
+  once with the release of that session's start (7647971).
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -286,7 +289,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 29)},  # final7 to final28: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 30)},  # final7 to final29: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -308,7 +311,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 29)},  # final8 to final28
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 30)},  # final8 to final29
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -415,6 +418,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final28", "mni", 3): 45103, ("final28", "mni15", 3): 45703, ("final28", "kmeans", 3): 45203,
          ("final28", "anatomical", 3): 45303, ("final28", "mni-axial", 2): 45102, ("final28", "mni-coronal", 2): 45402,
          ("final28", "mni-sagittal", 2): 45502, ("final28", "itk", 2): 45602,
+         ("final29", "mni", 3): 46103, ("final29", "mni15", 3): 46703, ("final29", "kmeans", 3): 46203,
+         ("final29", "anatomical", 3): 46303, ("final29", "mni-axial", 2): 46102, ("final29", "mni-coronal", 2): 46402,
+         ("final29", "mni-sagittal", 2): 46502, ("final29", "itk", 2): 46602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -431,7 +437,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
