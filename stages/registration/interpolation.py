@@ -1,11 +1,9 @@
 """Sampling an image between its pixels, in 2D and 3D: N-linear values and resampling onto another grid.
 
-Positions are continuous indices in ITK order (``(i, j[, k])``, pixel ``data[j, i]`` at ``(i, j)``). A
-position is **inside** when ``0 <= index <= size - 1`` on every axis (inside the hull of the pixel
-centres, where every N-linear neighbour exists); the samplers return that mask, and the registration
-leaves the other samples out of its histograms. :func:`resample` (outputs, figures, synthetic
-misalignments) fills them with ``fill``.
-"""
+Positions are continuous indices in ITK order (``(i, j[, k])``, pixel ``data[j, i]`` at ``(i, j)``). A position is
+**inside** when ``0 <= index <= size - 1`` on every axis (inside the hull of the pixel centres, where every N-linear
+neighbour exists); the samplers return that mask, and the registration leaves the other samples out of its histograms.
+:func:`resample` (outputs, figures, synthetic misalignments) fills them with ``fill``."""
 
 from __future__ import annotations
 

@@ -18,12 +18,11 @@ from topomatch.stages.registration.histogram import JointHistogram
 class Objective:
     """Similarity of fixed and transformed moving image at one resolution (callable on theta).
 
-    ``histogram``: anything with ``histogram(theta) -> (h, n_inside)``, ``n_samples`` and ``overlap(theta)``;
-    ``alpha``: the entropies' order (jt, jr, tmi); ``weights``: the Jensen divergences' (jt, jr). The measure is
-    multiplied by (fraction of fixed samples inside) ** ``overlap_power`` (0: not): samples that leave the moving
-    image count as carrying no information, so a sliver of overlap whose few samples happen to agree cannot
-    outscore a wide one (coarse levels).
-    """
+    ``histogram``: anything with ``histogram(theta) -> (h, n_inside)``, ``n_samples`` and ``overlap(theta)``; ``alpha``:
+    the entropies' order (jt, jr, tmi); ``weights``: the Jensen divergences' (jt, jr). The measure is multiplied by
+    (fraction of fixed samples inside) ** ``overlap_power`` (0: not): samples that leave the moving image count as
+    carrying no information, so a sliver of overlap whose few samples happen to agree cannot outscore a wide one (coarse
+    levels)."""
 
     def __init__(self, histogram: JointHistogram, metric: Metric = "jt", *, alpha: float = 2.0,
                  weights: Weights = "histogram", tmi_form: Literal["additive", "relative"] = "additive",

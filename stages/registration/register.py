@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import math
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from topomatch.pipeline.contract import StageError, StageResult, stage
-from topomatch.stages.registration.histogram import Binning, JointHistogram
+from topomatch.stages.registration.histogram import Binning, JointHistogram, histogram_threads
 from topomatch.stages.registration.image import Image, foreground_mask, gaussian_blur, grow, rms_radius
 from topomatch.stages.registration.objective import Objective
 from topomatch.stages.registration.params import DIMENSION_DEFAULTS, LevelSpec, RegisterParams, StartSpec, for_dimension
@@ -113,10 +114,7 @@ def initial_translation(fixed: Image, moving: Image, mode: str, angles=None) -> 
     return pm - c - euler_matrix(angles) @ (pf - c)
 
 
-@once_per_image
-def _centroid(image: Image) -> np.ndarray:
-    """The image's intensity centroid, computed once per image (the start search asks for it often)."""
-    return image.centroid()
+_centroid = once_per_image(Image.centroid)  # the intensity centroid, once per image (the start search asks often)
 
 
 def sample_mask(fixed: Image, params: RegisterParams) -> np.ndarray | None:
@@ -179,7 +177,7 @@ class _Run:
         self.lower, self.upper = (np.r_[[s * a] * self.k, self.start[self.k:] + s * self.max_translation] for s in (-1.0, 1.0))
         self.history: list[dict[str, np.ndarray]] = []
         self.ends: list[np.ndarray] = []
-        self._grid: GridSearch | None = None
+        self._grid: GridSearch | Future | None = None  # a Future while prefetch()'s search runs
 
     def _structures(self) -> dict[str, float]:
         """``<test>_fixed`` / ``<test>_moving`` for each outline-only test whose threshold ``check.min_<test>`` is
@@ -346,38 +344,38 @@ class _Run:
         res = self.optimize(0, spec, start, lower=lower, upper=upper, objective=objective)
         return res.theta, objective(res.theta)
 
-    def search_images(self, content: bool = False) -> SearchImages:
-        """The images at the coarse search's resolution (``content``: scaled to the fixed content's extent)."""
-        key = "_search_content" if content else "_search"
-        if not hasattr(self, key):
-            spacing = None
-            if content:
-                fg = np.argwhere(foreground_mask(self.fixed))
-                extent = (fg.max(axis=0) - fg.min(axis=0) + 1)[::-1] * np.asarray(self.fixed.spacing)
-                spacing = max(search_spacing([self.fixed, self.moving]) / 4, float(extent.min()) / 24)
-            setattr(self, key, SearchImages(self.fixed, self.moving, center=self.center,
-                                            min_overlap=self.params.metric.min_overlap, spacing=spacing))
-        return getattr(self, key)
-
     def grid(self) -> GridSearch:
-        """The coarse exhaustive search (once): 2D ``check.probes`` angles over the full circle, 3D no rotation and
-        ``check.angles`` about each axis; x a ``check.grid``^d square of translations over the search box about
-        the centroid-mapping translation of each rotation."""
+        """The coarse search (:meth:`coarse_search`), once, or the one :meth:`prefetch` started."""
         if self._grid is None:
-            c = self.params.check
-            if self.dim == 2:
-                rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
-                quarter = math.pi / c.probes / 2
-                polish = [np.array([-quarter]), np.array([0.0]), np.array([quarter])]
-            else:
-                rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
-                                                       for a in c.angles])
-                polish = [np.zeros(3)]
-            self._grid = grid_search(
-                self.search_images(), rotations,
-                lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
-                steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
+            self._grid = self.coarse_search()
+        elif isinstance(self._grid, Future):
+            self._grid = self._grid.result()
         return self._grid
+
+    def prefetch(self, pool: ThreadPoolExecutor) -> None:
+        """Start the coarse search in ``pool`` (on a search copy of its own: the same arithmetic), which the self-check
+        needs and the result does not, with a second CPU (not in the engine's workers) and images that overlap at the
+        start (else the checks may stop before they ask). Measured and left: the stability test's histogram too."""
+        if self.params.check.search and histogram_threads() > 1 and \
+                self.levels[0].objective.overlap(self.start) >= self.params.metric.min_overlap:
+            self._grid = pool.submit(self.coarse_search)
+
+    def coarse_search(self) -> GridSearch:
+        """The coarse exhaustive search on a search copy of its own: 2D ``check.probes`` angles over the full circle, 3D
+        no rotation and ``check.angles`` about each axis; x a ``check.grid``^d square of translations over the search
+        box about the centroid-mapping translation of each rotation."""
+        c = self.params.check
+        if self.dim == 2:
+            rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
+            quarter = math.pi / c.probes / 2
+            polish = [np.array([-quarter]), np.array([0.0]), np.array([quarter])]
+        else:
+            rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
+                                                   for a in c.angles])
+            polish = [np.zeros(3)]
+        images = SearchImages(self.fixed, self.moving, center=self.center, min_overlap=self.params.metric.min_overlap)
+        return grid_search(images, rotations, lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
+                           steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
 
     def candidates(self, theta: np.ndarray, n: int | None = None) -> list[np.ndarray]:
         """The ``n`` (``check.candidates``) best grid transforms away from the result, a grid cell apart."""
@@ -552,7 +550,7 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
     """Too little of the fixed image's content lands on the moving image's content."""
     if not (c := run.params.check).search:
         return []
-    content = run.measures["content"] = run.search_images().content_overlap(theta)
+    content = run.measures["content"] = run.grid().images.content_overlap(theta)
     return [Flag("content", f"only {content:.1%} of the fixed content (Otsu foreground) lands on the moving image's "
                             f"content at the result (min_content {c.min_content:.0%}): too little shared content")
             ] if content < c.min_content else []
@@ -601,7 +599,7 @@ def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
     """The result does not stand out of the coarse search's landscape (outline-only pairs: check.outline_prominence)."""
     if not (c := run.params.check).search:
         return []
-    prominence = run.measures["prominence"] = run.grid().prominence(run.search_images().score(theta, min_overlap=0.0))
+    prominence = run.measures["prominence"] = (grid := run.grid()).prominence(grid.images.score(theta, min_overlap=0.0))
     if prominence < c.min_prominence and (c.outline_prominence or not run.outline_only):
         return [Flag("prominence", f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
                                    f"deviations above a typical transform of a coarse search (min_prominence "
@@ -615,8 +613,11 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
     content's RMS radius)."""
     if (threshold := run.params.check.min_flatness) <= 0:
         return []
-    images = run.search_images(content=True)
-    radius = rms_radius(run.fixed, foreground_mask(run.fixed))
+    fg = np.argwhere(content := foreground_mask(run.fixed))  # a search copy scaled to the fixed content's extent
+    extent = (fg.max(axis=0) - fg.min(axis=0) + 1)[::-1] * np.asarray(run.fixed.spacing)
+    images = SearchImages(run.fixed, run.moving, center=run.center, min_overlap=run.params.metric.min_overlap,
+                          spacing=max(search_spacing([run.fixed, run.moving]) / 4, float(extent.min()) / 24))
+    radius = rms_radius(run.fixed, content)
     ratio, u = flatness(lambda t: images.score(t, min_overlap=0.0), theta, dim=run.dim, reach=6.0 * images.spacing,
                         radius=radius)
     run.measures["flatness"] = ratio
@@ -754,15 +755,17 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         if callback is not None:
             callback = (lambda user: lambda level, k, theta, value: user(level, k, theta * scale, value))(callback)
     run = _Run(fixed, moving, params, fixed_mask if fixed_mask is not None else sample_mask(fixed, params), callback)
-    theta, stop = run.schedule_from(run.start)
-    fine = run.levels[-1].objective
-    value = fine(theta)
-    flags = self_check(run, theta, value, stop)
-    restarts = int(run.better is not None and params.check.retry)  # the capture check's better end adopted
-    if restarts:
-        theta, stop, run.ends = run.better
+    with ThreadPoolExecutor(1) as pool:  # the compiled pass releases the interpreter's lock: prefetched work overlaps
+        run.prefetch(pool)
+        theta, stop = run.schedule_from(run.start)
+        fine = run.levels[-1].objective
         value = fine(theta)
         flags = self_check(run, theta, value, stop)
+        restarts = int(run.better is not None and params.check.retry)  # the capture check's better end adopted
+        if restarts:
+            theta, stop, run.ends = run.better
+            value = fine(theta)
+            flags = self_check(run, theta, value, stop)
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0)
                for k in ("level", "theta", "value", "step", "blocked")}
     if unit != 1.0:

@@ -129,7 +129,7 @@ class GridSearch:
     """A scored grid of transforms: parameters ``thetas`` (B, p), their search scores ``raw`` (B,; NaN without a
     sample inside) and fractions of the samples inside ``overlaps`` (B,), the grid's translation step ``spacing``
     (physical units); the first ``n_coarse`` rows are the regular grid, the rest polished points; ``min_overlap``:
-    the overlap bound of :attr:`values`."""
+    the overlap bound of :attr:`values`; ``images``: the search copy that scored them."""
 
     thetas: np.ndarray
     raw: np.ndarray
@@ -137,6 +137,7 @@ class GridSearch:
     spacing: float
     n_coarse: int
     min_overlap: float
+    images: SearchImages | None = None
 
     def values_at(self, min_overlap: float) -> np.ndarray:
         """The scores, ``-inf`` where fewer than ``min_overlap`` of the samples are inside."""
@@ -185,7 +186,7 @@ def grid_search(images: SearchImages, rotations: np.ndarray, translation_at: Cal
             parts.append(_score_cube(images, centre, half))
     spacing = float(np.min(np.linalg.norm(images.step_vectors(np.eye(d, dtype=np.intp)), axis=1))) * step
     return GridSearch(*(np.concatenate([p[i] for p in parts]) for i in range(3)), spacing, n_coarse,
-                      images.min_overlap)
+                      images.min_overlap, images)
 
 
 def _score_cube(images: SearchImages, centre: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -1,14 +1,12 @@
 """Interactive slice viewer of a registration for the run pages: fixed and moving with an opacity slider.
 
-For a 2D pair one view, for a volume three orthogonal slices (array axes k, j, i; which is axial
-depends on the acquisition, so they are named by axis) with a slider each; for every view the moving image resampled
-on the fixed grid **before** (the files' own placement) or **after** the registration, blended
-over the fixed image by an **opacity** slider, in grey (cross-fade) or in colour (fixed magenta,
-moving green: grey where they agree). Written by hand in a few lines of plain JavaScript on
-canvases (no library: a blend of two 8-bit images is all it draws); the images travel in the page
-as base64 bytes, each axis reduced to at most ``MAX_SIDE`` samples (``MAX_SAMPLES`` in all), so the page works offline
-from the run folder.
-"""
+For a 2D pair one view, for a volume three orthogonal slices (array axes k, j, i; which is axial depends on the
+acquisition, so they are named by axis) with a slider each; for every view the moving image resampled on the fixed grid
+**before** (the files' own placement) or **after** the registration, blended over the fixed image by an **opacity**
+slider, in grey (cross-fade) or in colour (fixed magenta, moving green: grey where they agree). Written by hand in a few
+lines of plain JavaScript on canvases (no library: a blend of two 8-bit images is all it draws); the images travel in
+the page as base64 bytes, each axis reduced to at most ``MAX_SIDE`` samples (``MAX_SAMPLES`` in all), so the page works
+offline from the run folder."""
 
 from __future__ import annotations
 

@@ -110,6 +110,46 @@ def test_same_seed_same_result(pd_slice, small_t1, d):
     assert a.transform.parameters != c.transform.parameters
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_the_prefetched_self_check_work_changes_nothing(pd_slice, small_t1, monkeypatch, d):
+    """With a second CPU the coarse search runs in a thread while the levels run: parameters, flags, measures,
+    history and evaluation counts equal those of the run without it."""
+    from concurrent.futures import Future
+
+    import topomatch.stages.registration.register as module
+
+    fixed, moving = (pd_slice, _moved(pd_slice, 4, -6, 9)) if d == 2 else (small_t1, moved(small_t1, RigidTransform(
+        (0.05, -0.03, 0.08, 3.0, -2.0, 1.5), small_t1.center)))
+    started = []
+    monkeypatch.setattr(module._Run, "prefetch", lambda run, pool, real=module._Run.prefetch: (
+        real(run, pool), started.append(isinstance(run._grid, Future))))
+    runs = []
+    for threads in (2, 1):
+        monkeypatch.setattr(module, "histogram_threads", lambda: threads)
+        runs.append(register(fixed, moving))
+    a, b = runs
+    assert started == [True, False] and a.ok and a.measures == b.measures and (a.flags, a.evaluations) == (b.flags, b.evaluations)
+    assert a.transform.parameters == b.transform.parameters and a.value == b.value
+    np.testing.assert_array_equal(a.history["theta"], b.history["theta"])
+
+
+def test_nothing_is_prefetched_for_images_that_do_not_overlap_at_the_start(small_t1, monkeypatch):
+    """The coarse search's canvas spans the gap between the images: for a 4-voxel volume 500 mm away it would take
+    gigabytes, and the self-check stops (no overlap) before it asks for the search; an overlapping pair gets it."""
+    import types
+
+    import topomatch.stages.registration.register as module
+
+    monkeypatch.setattr(module, "histogram_threads", lambda: 2)
+    tiny = Image(np.random.default_rng(0).normal(size=(4, 4, 4)), origin=tuple(np.asarray(small_t1.center) + 500.0))
+    for moving, expected in ((tiny, 0), (moved(small_t1, RigidTransform((0.0,) * 3 + (2.0,) * 3, small_t1.center)), 1)):
+        params = for_dimension(RegisterParams(transform={"init": "geometry"}, start={"steps": 0}), 3)
+        run = module._Run(small_t1, moving, params, module.sample_mask(small_t1, params), None)
+        submitted = []
+        run.prefetch(types.SimpleNamespace(submit=submitted.append))
+        assert submitted == [run.coarse_search] * expected
+
+
 def test_history_levels_and_counts(pd_slice):
     seen = []
     reg = register(pd_slice, _moved(pd_slice, 2, 3, 4), callback=lambda level, k, theta, value: seen.append(level))
