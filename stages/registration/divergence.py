@@ -1,14 +1,13 @@
 """Entropies and the entropic similarity measures of thesis ch. 2, computed from a joint histogram.
 
-Rows of ``h`` (n, k) belong to the reference (fixed) image X, columns to the moving Y; the conditional
-distributions are the normalised rows ``p_i``. Natural logarithms, ``0 log 0 = 0``, ``0 ** alpha = 0``; Tsallis
-``H_a(p) = (sum p^a - 1) / (1 - a)`` and Renyi ``R_a(p) = log(sum p^a) / (1 - a)`` are exactly Shannon's at a = 1.
-Measures (maximised at alignment): Jensen-Tsallis ``JT = H_a(sum w_i p_i) - sum w_i H_a(p_i)``, Jensen-Renyi (the
-same with R_a), mutual information, Tsallis MI (``form='additive'``: ``S(X) + S(Y) + (1 - a) S(X) S(Y) - S(X, Y)``,
-Martin et al. 2004; ``'relative'``: the Tsallis relative entropy of the joint to the product of the marginals).
-Weights: ``'histogram'`` (the thesis's: the fixed marginal) or ``'uniform'`` over the non-empty rows; empty rows
-are left out. See docs/registration.md, "Measures".
-"""
+Rows of ``h`` (n, k) belong to the reference (fixed) image X, columns to the moving Y; the conditional distributions are
+the normalised rows ``p_i``. Natural logarithms, ``0 log 0 = 0``, ``0 ** alpha = 0``; Tsallis ``H_a(p) = (sum p^a - 1) /
+(1 - a)`` and Renyi ``R_a(p) = log(sum p^a) / (1 - a)`` are exactly Shannon's at a = 1. Measures (maximised at
+alignment): Jensen-Tsallis ``JT = H_a(sum w_i p_i) - sum w_i H_a(p_i)``, Jensen-Renyi (the same with R_a), mutual
+information, Tsallis MI (``form='additive'``: ``S(X) + S(Y) + (1 - a) S(X) S(Y) - S(X, Y)``, Martin et al. 2004;
+``'relative'``: the Tsallis relative entropy of the joint to the product of the marginals). Weights: ``'histogram'``
+(the thesis's: the fixed marginal) or ``'uniform'`` over the non-empty rows; empty rows are left out. See
+docs/registration.md, "Measures"."""
 
 from __future__ import annotations
 

@@ -4,11 +4,10 @@ The known transform (``truth``: a mapping from the parameter names of :data:`~.t
 degrees; missing names are 0; an optional ``center``) is read in the estimate's convention, about the fixed grid's
 centre unless it gives its own.
 
-The **target registration error** of a fixed point p is ``|T_est(p) - T_true(p)|`` (physical units); ``tre_mean``
-is its mean over the fixed grid's pixels (``region: all``, the 2D default) or over its Otsu foreground
-(``foreground``, the 3D default: the head, not the air around it), ``tre_max`` its maximum. A registration succeeds
-when ``tre_mean <= threshold``. Angle errors are wrapped to (-180, 180].
-"""
+The **target registration error** of a fixed point p is ``|T_est(p) - T_true(p)|`` (physical units); ``tre_mean`` is its
+mean over the fixed grid's pixels (``region: all``, the 2D default) or over its Otsu foreground (``foreground``, the 3D
+default: the head, not the air around it), ``tre_max`` its maximum. A registration succeeds when ``tre_mean <=
+threshold``. Angle errors are wrapped to (-180, 180]."""
 
 from __future__ import annotations
 

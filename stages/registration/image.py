@@ -8,8 +8,7 @@ Geometry exactly as ITK / SimpleITK define it, for every dimension ``d`` (2 or 3
 ``spacing``, ``origin`` and ``direction`` are in ITK's index order (x first), ``direction``'s *columns* are the grid
 axes. A PNG has spacing 1, origin 0 and the identity direction, so its physical point of pixel ``[r, c]`` is
 ``(c, r)``: pixel units. Everything the registration computes (the rotation centre, transforms, errors) is in these
-physical coordinates; this module is the only place that converts between indices and points.
-"""
+physical coordinates; this module is the only place that converts between indices and points."""
 
 from __future__ import annotations
 

@@ -84,6 +84,7 @@ class OptimizerSpec(_Named):
     tol: float = Field(0.0, ge=0, description="stop a level when `window` steps are shorter (physical units)")
     average_last: int = Field(1, ge=1, description="result of a level = mean of its last iterates")
     average_finest: int = Field(10, ge=1, description="the finest level's average_last (pairs not measured as outlines)")
+    ensemble: int = Field(0, ge=0, le=16, description="finest-level re-runs on other samples averaged into the result")
 
 
 class LevelSpec(Params):
@@ -277,6 +278,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         # finest level; the thresholds of the self-check: the validation corpus's tune split (docs/registration.md)
         "schedule": [_level(4.0, 16, 260, 4.0, 8.0, "parzen"), _level(2.0, 24, 40, 1.0, 2.0, "parzen"),
                      _level(0.0, 32, 30, 0.3, 0.5, "parzen", 20000, average=2, gain_alpha=1.0)],
+        "optimizer": {"ensemble": 2},  # thirty-first round
     },
     3: {
         # 8, 4 and 2 mm (the 3D tune sets of docs/registration.md)

@@ -311,10 +311,20 @@ class _Run:
                     theta = res.theta
                 stop = res.stop_reason
                 self.history.append({"level": np.full(res.iterations, li), **res.history})
-                if not self.still_moving(res.history["theta"], spec.settle):
+                path = res.history["theta"]  # its last half moved more than settle: the decaying steps ran out
+                if not (spec.settle > 0 and len(path) >= 4 and self.distance(path[-1], path[len(path) // 2]) > spec.settle):
                     break
             self.ends.append(np.asarray(theta, dtype=np.float64))
         return np.asarray(theta, dtype=np.float64), stop
+
+    def ensemble(self, theta: np.ndarray) -> np.ndarray:
+        """``theta`` and the ends within one unit of it of ``optimizer.ensemble`` finest-level runs from it on other samples
+        (own stream), averaged: the finest optimum moves with the sample (31st round); not for pairs measured as outlines."""
+        n = 0 if self.outline_measure else self.params.optimizer.ensemble  # none: the mean of theta alone is theta
+        li, fine, rng = len(self.levels) - 1, self.levels[-1], np.random.default_rng(self.params.seed + 15485863)
+        ends = [self.optimize(li, fine.spec, theta, lower=self.lower, upper=self.upper, rng=rng, objective=fine.objective.on(
+            self.histogram(fine.spec, fine.images, fine.spec.samples, self.params.seed + 7919 * (20 + k)))).theta for k in range(n)]
+        return np.mean([theta] + [e for e in ends if self.distance(e, theta) <= 1.0], axis=0)
 
     def drops(self, theta, seed: int | None = None):
         """(level, relative drop of its measure from its end to ``theta``: 1 if unscored) of each coarser level that
@@ -324,11 +334,6 @@ class _Run:
             there, here = f(self.ends[li]), f(theta)
             if math.isfinite(there) and there > 0 and self.distance(theta, self.ends[li]) > 0.25 * lv.spacing:
                 yield li, 1.0 - here / there if math.isfinite(here) else 1.0
-
-    def still_moving(self, path: np.ndarray, settle: float) -> bool:
-        """Whether the last half of the iterates ``path`` (k, p) moved the estimate by more than ``settle``: the
-        level's decaying steps ran out before it converged."""
-        return settle > 0 and len(path) >= 4 and self.distance(path[-1], path[len(path) // 2]) > settle
 
     def distance(self, a: np.ndarray, b: np.ndarray) -> float:
         """Approximate RMS displacement between two transforms: the translation and each angle's arc at the RMS
@@ -353,9 +358,8 @@ class _Run:
         return self._grid
 
     def prefetch(self, pool: ThreadPoolExecutor) -> None:
-        """Start the coarse search in ``pool`` (on a search copy of its own: the same arithmetic), which the self-check
-        needs and the result does not, with a second CPU (not in the engine's workers) and images that overlap at the
-        start (else the checks may stop before they ask). Measured and left: the stability test's histogram too."""
+        """Start in ``pool`` the coarse search (own search copy), which the checks need and the result does not, with a second
+        CPU (not in the engine's workers) and images that overlap at the start (else the checks may stop before asking)."""
         if self.params.check.search and histogram_threads() > 1 and \
                 self.levels[0].objective.overlap(self.start) >= self.params.metric.min_overlap:
             self._grid = pool.submit(self.coarse_search)
@@ -398,9 +402,7 @@ class _Run:
         return [chosen[i] for i in order[: c.candidates]]
 
 
-# --------------------------------------------------------------------------- self-check
-# Each check is ``check(run, theta, value, stop) -> list[Flag]``; the capture check may also leave a better
-# result in ``run.better``.
+# ------------------------------------------- self-check: ``check(run, theta, value, stop) -> list[Flag]`` (and run.better)
 
 
 def check_start(run: _Run, theta, value, stop) -> list[Flag]:
@@ -758,13 +760,13 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     with ThreadPoolExecutor(1) as pool:  # the compiled pass releases the interpreter's lock: prefetched work overlaps
         run.prefetch(pool)
         theta, stop = run.schedule_from(run.start)
-        fine = run.levels[-1].objective
+        theta, fine = run.ensemble(theta), run.levels[-1].objective
         value = fine(theta)
         flags = self_check(run, theta, value, stop)
         restarts = int(run.better is not None and params.check.retry)  # the capture check's better end adopted
         if restarts:
             theta, stop, run.ends = run.better
-            value = fine(theta)
+            value = fine(theta := run.ensemble(theta))
             flags = self_check(run, theta, value, stop)
     history = {k: np.concatenate([h[k] for h in run.history]) if run.history else np.zeros(0)
                for k in ("level", "theta", "value", "step", "blocked")}

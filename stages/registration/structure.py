@@ -147,12 +147,12 @@ def interior_spread(image: Image) -> float:
 def two_class_residual(image: Image) -> float:
     """The worse of ``image``'s two Otsu classes' variance over the squared difference of their means (an inverse
     squared contrast-to-noise ratio, unit-free): a mask or silhouette with noise s and contrast D scores (s / D)^2
-    whatever fraction of the grid it fills (2 % noise: 4e-4), an image with an inside far more (brain sections
-    >= 0.004 on the corpus). Judged only where :func:`interior_structure` and :func:`interior_spread` cannot (both
-    NaN: an object that fills the grid, a tight field of view; both are kept on the image, so asking them again
-    costs nothing); NaN elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`). (Dividing by the total
-    variance instead made a silhouette filling 99 % of the grid read as structure: its total variance is little more
-    than the noise.)"""
+    whatever fraction of the grid it fills (2 % noise: 4e-4), an image with an inside far more (brain sections >=
+    0.004 on the corpus). Judged only where :func:`interior_structure` and :func:`interior_spread` cannot (both NaN:
+    an object that fills the grid, a tight field of view; both are kept on the image, so asking them again costs
+    nothing); NaN elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`). (Dividing by the total variance
+    instead made a silhouette filling 99 % of the grid read as structure: its total variance is little more than the
+    noise.)"""
     if not (np.isnan(interior_structure(image)) and np.isnan(interior_spread(image))):
         return float("nan")
     data = image.data.ravel()

@@ -150,6 +150,28 @@ def test_nothing_is_prefetched_for_images_that_do_not_overlap_at_the_start(small
         assert submitted == [run.coarse_search] * expected
 
 
+def test_the_result_is_averaged_over_other_samples_of_the_finest_level(pd_slice, monkeypatch):
+    """Thirty-first round (``optimizer.ensemble``, 2D default 2, 3D 0): the result is the mean of the finest end and
+    the ends of re-runs from it on other samples, leaving out an end over one unit away; a pair measured as an outline
+    keeps its end. The re-runs' ends are set by hand here, so the mean is known."""
+    import types
+
+    import topomatch.stages.registration.register as module
+
+    assert [for_dimension(RegisterParams(), d).optimizer.ensemble for d in (2, 3)] == [2, 0]
+    params = for_dimension(RegisterParams(optimizer={"ensemble": 3}), 2)
+    run = module._Run(pd_slice, _moved(pd_slice, 4, -6, 9), params, module.sample_mask(pd_slice, params), None)
+    theta = np.array([0.1, 4.0, -6.0])
+    ends = iter([theta + [0, 0.3, 0], theta + [0, -0.6, 0.3], theta + [0, 2.0, 0]])  # the last 2 units away: left out
+    seeds = []
+    monkeypatch.setattr(run, "histogram", lambda spec, images, samples, seed: seeds.append(seed) or run.levels[-1].objective.histogram)
+    monkeypatch.setattr(run, "optimize", lambda *a, **k: types.SimpleNamespace(theta=next(ends)))
+    np.testing.assert_allclose(run.ensemble(theta), theta + [0, -0.1, 0.1], atol=1e-12)
+    assert len(set(seeds)) == 3 and params.seed + 2 not in seeds  # three other samples, none the finest level's own
+    run.outline_measure = True
+    np.testing.assert_array_equal(run.ensemble(theta), theta)
+
+
 def test_history_levels_and_counts(pd_slice):
     seen = []
     reg = register(pd_slice, _moved(pd_slice, 2, 3, 4), callback=lambda level, k, theta, value: seen.append(level))
