@@ -636,8 +636,8 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     """Another basin is better (:func:`_better_basin`): found by the grid's ``check.candidates`` best transforms
-    (adopted with ``check.retry``), else by :meth:`_Run.shortlisted`, adopted only on a pair measured at order 1
-    (thirteenth round; on a mask read as an image, adopting a basin the grid ranked low added silent errors); a fixed mask
+    (adopted with ``check.retry``), else by :meth:`_Run.shortlisted`, adopted too (thirty-second round; from the
+    thirteenth only on a pair measured at order 1: on masks read as images it had added silent errors); a fixed mask
     sampled over every pixel, adopted where higher at full resolution (thirtieth round); on a pair read as an image that no
     start search began (``check.start_search``), the 3D start search's end, which only flags (own stream, no history)."""
     if not (c := run.params.check).search:
@@ -646,7 +646,7 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     flags = _better_basin(run, theta, value, probes, adopt=True)
     if not flags and c.shortlist > c.candidates:
         more = [p for p in run.shortlisted(theta) if not any(np.array_equal(p, q) for q in probes)]
-        flags = _better_basin(run, theta, value, more, adopt=run.outline_measure)
+        flags = _better_basin(run, theta, value, more, adopt=True)
     if run.mask is not None and any(k.endswith("_fixed") for k, *_ in _below_outline_thresholds(run)):
         if getattr(run, "whole_end", None) is None:  # a fixed mask sampled over every pixel (30th round), once a run
             run.whole_end = (whole := _Run(run.fixed, run.moving, run.params, None, None)).schedule_from(whole.start)[0]
