@@ -59,8 +59,7 @@ def probe(case: corpus.Case, reruns: int) -> tuple[bool, dict[str, float]]:
     every = fine.objective.on(run.histogram(fine.spec, fine.images, None, params.seed + 99))
     out = {"result": tre(theta), "polished": tre(polish(fine.objective)), "polished-all": tre(polish(every))}
     same = [rerun(fine.objective) for _ in range(reruns)]
-    other = [rerun(fine.objective.on(run.histogram(fine.spec, fine.images, fine.spec.samples, params.seed + 7919 * (20 + k))))
-             for k in range(reruns)]
+    other = [rerun(run.on_sample(fine, params.seed + 7919 * (20 + k))) for k in range(reruns)]
     for k in range(1, reruns + 1):
         out[f"same-{k}"] = tre(np.mean([theta] + same[:k], axis=0))
         out[f"other-{k}"] = tre(np.mean([theta] + other[:k], axis=0))

@@ -295,10 +295,10 @@ class _Run:
         return powell_maximize(objective, theta, settings, scales=self.scales, lower=lower, upper=upper,
                                callback=callback)
 
-    def schedule_from(self, theta: np.ndarray, done: int = 0) -> tuple[np.ndarray, str]:
-        """Optimise level by level from ``theta`` (the first level continuing its gains after ``done``
-        iterations already made from a refined probe); record each level's history and end."""
-        stop, self.ends = "", []
+    def schedule_from(self, theta: np.ndarray, done: int = 0) -> tuple[np.ndarray, str, list[np.ndarray]]:
+        """Optimise level by level from ``theta`` (the first level continuing its gains after ``done`` iterations already
+        made from a refined probe), recording each level's history: (the end, its stop reason, each level's end)."""
+        stop, ends = "", []
         for li, level in enumerate(self.levels):
             cb = None if self.callback is None else (lambda k, th, v, li=li: self.callback(li, k, th, v))
             spec, start = level.spec, 0
@@ -314,23 +314,27 @@ class _Run:
                 path = res.history["theta"]  # its last half moved more than settle: the decaying steps ran out
                 if not (spec.settle > 0 and len(path) >= 4 and self.distance(path[-1], path[len(path) // 2]) > spec.settle):
                     break
-            self.ends.append(np.asarray(theta, dtype=np.float64))
-        return np.asarray(theta, dtype=np.float64), stop
+            ends.append(np.asarray(theta, dtype=np.float64))
+        return np.asarray(theta, dtype=np.float64), stop, ends
+
+    def on_sample(self, level: _Level, seed: int) -> Objective:
+        """``level``'s measure on another sample of its images (another subset, another jitter), drawn with ``seed``."""
+        return level.objective.on(self.histogram(level.spec, level.images, level.spec.samples, seed))
 
     def ensemble(self, theta: np.ndarray) -> np.ndarray:
         """``theta`` and the ends within one unit of it of ``optimizer.ensemble`` finest-level runs from it on other samples
         (own stream), averaged: the finest optimum moves with the sample (31st round); not for pairs measured as outlines."""
         n = 0 if self.outline_measure else self.params.optimizer.ensemble  # none: the mean of theta alone is theta
         li, fine, rng = len(self.levels) - 1, self.levels[-1], np.random.default_rng(self.params.seed + 15485863)
-        ends = [self.optimize(li, fine.spec, theta, lower=self.lower, upper=self.upper, rng=rng, objective=fine.objective.on(
-            self.histogram(fine.spec, fine.images, fine.spec.samples, self.params.seed + 7919 * (20 + k)))).theta for k in range(n)]
+        ends = [self.optimize(li, fine.spec, theta, lower=self.lower, upper=self.upper, rng=rng,
+                              objective=self.on_sample(fine, self.params.seed + 7919 * (20 + k))).theta for k in range(n)]
         return np.mean([theta] + [e for e in ends if self.distance(e, theta) <= 1.0], axis=0)
 
     def drops(self, theta, seed: int | None = None):
         """(level, relative drop of its measure from its end to ``theta``: 1 if unscored) of each coarser level that
         ended over a quarter of its spacing away, lazily; ``seed``: on another sample (other subset, other jitter)."""
         for li, lv in enumerate(self.levels[:-1]):
-            f = lv.objective if seed is None else lv.objective.on(self.histogram(lv.spec, lv.images, lv.spec.samples, seed))
+            f = lv.objective if seed is None else self.on_sample(lv, seed)
             there, here = f(self.ends[li]), f(theta)
             if math.isfinite(there) and there > 0 and self.distance(theta, self.ends[li]) > 0.25 * lv.spacing:
                 yield li, 1.0 - here / there if math.isfinite(here) else 1.0
@@ -515,8 +519,7 @@ def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
     whose outline hardly constrains the rotation, an undetermined direction)."""
     if (limit := run.params.check.stability) <= 0:
         return []
-    li, fine = len(run.levels) - 1, run.levels[-1]
-    other = fine.objective.on(run.histogram(fine.spec, fine.images, fine.spec.samples, run.params.seed + 7919))
+    li, fine, other = len(run.levels) - 1, run.levels[-1], run.on_sample(run.levels[-1], run.params.seed + 7919)
     end = run.optimize(li, fine.spec, theta, lower=run.lower, upper=run.upper, objective=other).theta
     shift = run.measures["stability"] = run.distance(end, theta)
     if shift <= limit:
@@ -650,8 +653,7 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     if run.mask is not None and any(k.endswith("_fixed") for k, *_ in _below_outline_thresholds(run)):
         if getattr(run, "whole_end", None) is None:  # a fixed mask sampled over every pixel (30th round), once a run
             run.whole_end = (whole := _Run(run.fixed, run.moving, run.params, None, None)).schedule_from(whole.start)[0]
-        saved, (end, end_stop) = run.ends, run.schedule_from(run.whole_end)
-        better_ends, run.ends = run.ends, saved
+        end, end_stop, better_ends = run.schedule_from(run.whole_end)
         best = (fine := run.levels[-1].objective)(theta if run.better is None else run.better[0])
         if fine(end) > best + c.margin * abs(best) and run.distance(end, theta) >= 2.0 * run.levels[0].spacing:
             run.better, flags = (end, end_stop, better_ends), flags + [Flag("capture", f"sampled over every fixed pixel, "
@@ -685,9 +687,7 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
     if not math.isfinite(best_value) or (math.isfinite(here) and best_value <= here + c.margin * abs(here)):
         return []
     if np.all(best >= run.lower) and np.all(best <= run.upper):
-        saved = run.ends
-        end, end_stop = run.schedule_from(best, done=c.refine)
-        better_ends, run.ends = run.ends, saved
+        end, end_stop, better_ends = run.schedule_from(best, done=c.refine)
         confirmed = fine(end) > value and run.distance(end, theta) >= 2.0 * levels[0].spacing
         if adopt:
             run.better = (end, end_stop, better_ends) if confirmed else None
@@ -698,8 +698,8 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
     if not confirmed:
         return []
     kind = ("the registration stopped in a local optimum; the misalignment is probably outside the capture range"
-            if adopt else "a basin the coarse grid ranked low (check.shortlist, start_search), not adopted: such "
-            "basins are as often wrong where the measure cannot be trusted (a mask read as an image); check the overlay")
+            if adopt else "a basin the 3D start search found (check.start_search), not adopted: such basins are as "
+            "often wrong where the measure cannot be trusted (a mask read as an image); check the overlay")
     return [Flag("capture", f"a start at {describe(run.at(best))} reaches a higher value than the result "
                             f"({best_value:.4g} > {here:.4g} at the {levels[0].spacing:g}-unit level) {where}: {kind}")]
 
@@ -759,7 +759,7 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
     run = _Run(fixed, moving, params, fixed_mask if fixed_mask is not None else sample_mask(fixed, params), callback)
     with ThreadPoolExecutor(1) as pool:  # the compiled pass releases the interpreter's lock: prefetched work overlaps
         run.prefetch(pool)
-        theta, stop = run.schedule_from(run.start)
+        theta, stop, run.ends = run.schedule_from(run.start)
         theta, fine = run.ensemble(theta), run.levels[-1].objective
         value = fine(theta)
         flags = self_check(run, theta, value, stop)
