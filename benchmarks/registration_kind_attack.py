@@ -1,0 +1,142 @@
+"""An attack on the self-check with **moving kinds the corpus never drew and no threshold was tuned on**: the label
+images users bring besides a three-class tissue map, and outline images in other forms than a filled silhouette,
+registered as a user does (``topomatch.register(fixed_path, moving_path, metric=m)``, defaults, from files), elastix
+beside it.
+
+The cases are the validation corpus's (``registration_corpus.py``: its sources, draws of rigid transforms, sections,
+frames, crops, noise and bias) in a split of their own, ``kinds`` (seeds 52xxx, drawn by no other script, declared
+before any of its results was seen), whose moving kinds are made here and added to the corpus's kinds for this run
+only:
+
+- ``atlas``: an atlas-like parcellation, the tissue classes (CSF, GM, WM, as the corpus's ``labels``) of each of
+  6-20 regions (Voronoi cells of seeds drawn inside the brain), their labels a random permutation of 1..3R (18-60
+  labels at arbitrary values, as FreeSurfer's or an atlas's label values are: no monotonic relation to any
+  intensity); no noise;
+- ``regions``: the regions alone (4-24 labels at random values, 0 outside): a parcellation whose inner boundaries
+  are geometric, not anatomical, so that only its outline corresponds to the T1 (under 17 labels it is measured
+  as a discrete image, above as an ordinary one); no noise;
+- ``inverted_mask``: the brain mask at 0 on a background of 1 (an exclusion mask), plus noise;
+- ``contour``: the brain mask's boundary as a bright band 2 voxels wide on black (an outline drawing, the purest
+  form of "the only structure is the outline"), plus noise;
+- ``t1``: the control.
+
+The regions are Voronoi cells in the moving image's physical space (their seeds drawn inside its brain mask), so
+they are not attached to the anatomy; the kinds above them carry the moved tissue maps and mask like the corpus's.
+A third of the non-control cases are swapped (the kind is the fixed image, the moved T1 the moving one). 2D MNI
+sections get the corpus's tight frame (45-60 % of each axis) one time in four; 3D volumes get no thick slices (the
+regions are drawn on the moving grid). Correct = mean TRE <= 1 pixel (2D) / 1 mm (3D); counts per kind: ok / FF
+(correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
+
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_kind_attack.py --dims 2 \\
+        --json benchmarks/results/registration_kind_attack_2d.json
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage, spatial
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws, methods and scoring)
+
+SPLIT = "kinds"
+KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
+SOURCES = {3: [("mni", 10), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
+           2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 10)]}
+SEEDS = {("mni", 3): 52103, ("mni15", 3): 52703, ("kmeans", 3): 52203, ("anatomical", 3): 52303,
+         ("mni-axial", 2): 52102, ("mni-coronal", 2): 52402, ("mni-sagittal", 2): 52502, ("itk", 2): 52602}
+CONTOUR_WIDTH = 2
+"""Voxels: the width of the contour band (inside the mask's boundary)."""
+
+
+def _regions(f: corpus.Fields, spec: corpus.CaseSpec, low: int, high: int) -> tuple[np.ndarray, int]:
+    """(index of the nearest of R seeds drawn inside the brain mask, 0..R-1, on the grid; R) with R in [low, high]."""
+    rng = np.random.default_rng([spec.seed, spec.index, 13])
+    inside = np.flatnonzero(corpus._foreground(f))
+    r = int(rng.integers(low, high + 1))
+    seeds = f.grid.points(inside[rng.choice(len(inside), size=min(r, len(inside)), replace=False)])
+    _, nearest = spatial.cKDTree(seeds).query(f.grid.points())
+    return nearest.reshape(f.grid.shape), len(seeds)
+
+
+def _permuted(labels: np.ndarray, count: int, spec: corpus.CaseSpec) -> np.ndarray:
+    """``labels`` (0..count-1) mapped to a random permutation of 1..count."""
+    values = 1 + np.random.default_rng([spec.seed, spec.index, 17]).permutation(count)
+    return values[labels].astype(np.float64)
+
+
+def kind_atlas(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """Tissue class of each Voronoi region, as labels at random values (no noise)."""
+    region, r = _regions(f, spec, 6, 20)
+    tissue = corpus.kind_labels(f, spec, deg).astype(int)  # 0 outside, 1..3 inside
+    label = _permuted(3 * region + np.maximum(tissue, 1) - 1, 3 * r, spec)
+    return np.where(tissue > 0, label, 0.0)
+
+
+def kind_regions(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """Voronoi regions of the brain at random label values, 0 outside (no noise)."""
+    region, r = _regions(f, spec, 4, 24)
+    return np.where(corpus._foreground(f), _permuted(region, r, spec), 0.0)
+
+
+def kind_inverted_mask(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """0 in the brain, 1 outside, plus noise."""
+    return deg.noise(1.0 - corpus._foreground(f).astype(np.float64))
+
+
+def kind_contour(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """The mask's boundary band, :data:`CONTOUR_WIDTH` voxels wide, at 1 on 0, plus noise."""
+    mask = corpus._foreground(f)
+    band = mask & ~ndimage.binary_erosion(mask, iterations=CONTOUR_WIDTH, border_value=1)
+    return deg.noise(band.astype(np.float64))
+
+
+def register_split() -> None:
+    """Add the split and its kinds to the corpus module (this process only)."""
+    if SPLIT in corpus.SPLITS:
+        return
+    corpus.KIND_MAKERS.update({"atlas": kind_atlas, "regions": kind_regions, "inverted_mask": kind_inverted_mask,
+                               "contour": kind_contour})
+    corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:4]
+    corpus.SPLITS[SPLIT] = SOURCES
+    corpus.KINDS[SPLIT] = KINDS
+    corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
+    corpus.SPLIT_ORDER[SPLIT] = max(corpus.SPLIT_ORDER.values()) + 100
+    plan, needed = corpus.plan_case, corpus.maps_needed
+
+    def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
+        spec = plan(split, source, dim, index, place)
+        if split != SPLIT:
+            return spec
+        spec = dataclasses.replace(spec, thick=False)
+        u = np.random.default_rng([spec.seed, index, 11]).uniform(size=5)
+        if spec.section is None or u[0] >= 0.25:
+            return spec
+        section = {"position": spec.section["position"], "spacing": spec.section["spacing"], "frame": "tight",
+                   "crop_fractions": [float(v) for v in 0.45 + 0.15 * u[1:3]],
+                   "crop_starts": [float(v) for v in u[3:]]}
+        return dataclasses.replace(spec, section=section)
+
+    def maps_needed(kind: str, f: corpus.Fields) -> set[str]:
+        extra = {"atlas": needed("labels", f), "regions": {"mask"}, "inverted_mask": {"mask"}, "contour": {"mask"}}
+        return extra[kind] | {"t1"} if kind in extra else needed(kind, f)
+
+    corpus.plan_case, corpus.maps_needed = plan_case, maps_needed
+
+
+def main() -> None:
+    """The corpus's command line (``registration_corpus.py --help``) on this split; its defaults here: JT and MI,
+    ours and elastix."""
+    register_split()
+    argv = sys.argv[1:]
+    defaults = {"--metrics": "jt,mi", "--methods": "ours,elastix"}
+    split = [] if "--split" in argv else ["--split", SPLIT]
+    corpus.main(split + [x for k, v in defaults.items() if k not in argv for x in (k, v)] + argv)
+
+
+if __name__ == "__main__":
+    main()
