@@ -5,7 +5,7 @@ beside it.
 
 The cases are the validation corpus's (``registration_corpus.py``: its sources, draws of rigid transforms, sections,
 frames, crops, noise and bias) in a split of their own, ``kinds`` (seeds 52xxx, drawn by no other script, declared
-before any of its results was seen), whose moving kinds are made here and added to the corpus's kinds for this run
+before any of its results was seen; ``--split kinds-2``: seeds 53xxx, the same design), whose moving kinds are made here and added to the corpus's kinds for this run
 only:
 
 - ``atlas``: an atlas-like parcellation, the tissue classes (CSF, GM, WM, as the corpus's ``labels``) of each of
@@ -44,11 +44,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws, methods and scoring)
 
 SPLIT = "kinds"
+SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000}
+"""The splits and their seeds' base (``kinds-2``: the same design, declared after ``kinds`` had run once, before any
+code changed; run once with the same release)."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
 SOURCES = {3: [("mni", 10), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
            2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 10)]}
-SEEDS = {("mni", 3): 52103, ("mni15", 3): 52703, ("kmeans", 3): 52203, ("anatomical", 3): 52303,
-         ("mni-axial", 2): 52102, ("mni-coronal", 2): 52402, ("mni-sagittal", 2): 52502, ("itk", 2): 52602}
+SEEDS = {("mni", 3): 103, ("mni15", 3): 703, ("kmeans", 3): 203, ("anatomical", 3): 303,
+         ("mni-axial", 2): 102, ("mni-coronal", 2): 402, ("mni-sagittal", 2): 502, ("itk", 2): 602}
+"""Each source's seed offset from its split's base."""
 CONTOUR_WIDTH = 2
 """Voxels: the width of the contour band (inside the mask's boundary)."""
 
@@ -102,15 +106,15 @@ def register_split() -> None:
     corpus.KIND_MAKERS.update({"atlas": kind_atlas, "regions": kind_regions, "inverted_mask": kind_inverted_mask,
                                "contour": kind_contour})
     corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:4]
-    corpus.SPLITS[SPLIT] = SOURCES
-    corpus.KINDS[SPLIT] = KINDS
-    corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
-    corpus.SPLIT_ORDER[SPLIT] = max(corpus.SPLIT_ORDER.values()) + 100
+    last = max(corpus.SPLIT_ORDER.values())
+    for i, (split, base) in enumerate(SPLIT_SEEDS.items()):
+        corpus.SPLITS[split], corpus.KINDS[split], corpus.SPLIT_ORDER[split] = SOURCES, KINDS, last + 100 + i
+        corpus.SEEDS.update({(split, source, dim): base + offset for (source, dim), offset in SEEDS.items()})
     plan, needed = corpus.plan_case, corpus.maps_needed
 
     def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
         spec = plan(split, source, dim, index, place)
-        if split != SPLIT:
+        if split not in SPLIT_SEEDS:
             return spec
         spec = dataclasses.replace(spec, thick=False)
         u = np.random.default_rng([spec.seed, index, 11]).uniform(size=5)
