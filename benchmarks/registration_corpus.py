@@ -216,6 +216,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   of ``final31``, fresh seeds 49xxx, run once: a second fresh measure of the thirty-first and thirty-second rounds.
 - ``final33``: declared at the start of a session (2026-12-06, fourth) with the release of ``final32`` (b181569),
   the design of ``final32``, fresh seeds 50xxx, run once with that release: a third fresh measure of it.
+- ``final34``: declared with the thirty-third round (the `content` test measures both images' content with its holes
+  filled, 4-connected: the inside of an outline drawing is content), the design of ``final33``, fresh seeds 51xxx, run
+  once with the round's code if its tune side and attacks pass, else with the code before it.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -299,7 +302,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 34)},  # final7 to final33: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 35)},  # final7 to final34: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -321,7 +324,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 34)},  # final8 to final33
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 35)},  # final8 to final34
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -443,6 +446,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final33", "mni", 3): 50103, ("final33", "mni15", 3): 50703, ("final33", "kmeans", 3): 50203,
          ("final33", "anatomical", 3): 50303, ("final33", "mni-axial", 2): 50102, ("final33", "mni-coronal", 2): 50402,
          ("final33", "mni-sagittal", 2): 50502, ("final33", "itk", 2): 50602,
+         ("final34", "mni", 3): 51103, ("final34", "mni15", 3): 51703, ("final34", "kmeans", 3): 51203,
+         ("final34", "anatomical", 3): 51303, ("final34", "mni-axial", 2): 51102, ("final34", "mni-coronal", 2): 51402,
+         ("final34", "mni-sagittal", 2): 51502, ("final34", "itk", 2): 51602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -459,7 +465,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12

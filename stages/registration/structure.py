@@ -32,14 +32,16 @@ between (a soft mask), not an inside (twenty-third round)."""
 RAMP_LEVELS = MetricSpec.model_fields["discrete_levels"].default
 
 
-def fill_holes(mask: np.ndarray) -> np.ndarray:
+def fill_holes(mask: np.ndarray, *, cross: bool = False) -> np.ndarray:
     """``mask`` with every background region that does not reach the grid's border filled (8- / 26-connected
-    background, as ``scipy.ndimage.binary_fill_holes`` with a full structuring element)."""
+    background, as ``scipy.ndimage.binary_fill_holes`` with a full structuring element; ``cross``: 4- / 6-connected, as
+    with its default one, so that a one-pixel outline with diagonal steps encloses its inside)."""
     mask = np.asarray(mask, dtype=bool)
     free = ~mask
     outside = free & border(mask.shape)
-    while True:  # geodesic dilation of the border's background inside the background
-        grown = grow(outside, 1.0) & free
+    while True:  # geodesic dilation of the border's background inside the background (np.roll's wrap meets the border)
+        grown = (np.logical_or.reduce([outside] + [np.roll(outside, s, a) for a in range(mask.ndim) for s in (1, -1)])
+                 if cross else grow(outside, 1.0)) & free
         if np.array_equal(grown, outside):
             return ~outside
         outside = grown
