@@ -207,6 +207,20 @@ def grow(mask: np.ndarray, distance: float, spacing=None) -> np.ndarray:
     return out
 
 
+def fill_holes(mask: np.ndarray, *, cross: bool = False) -> np.ndarray:
+    """``mask`` with every background region that does not reach the grid's border filled: 8- / 26-connected background
+    (scipy's ``binary_fill_holes`` with a full structuring element), with ``cross`` 4- / 6-connected (its default)."""
+    mask = np.asarray(mask, dtype=bool)
+    free = ~mask
+    outside = free & border(mask.shape)
+    while True:  # geodesic dilation of the border's background inside the background (np.roll's wrap meets the border)
+        grown = (np.logical_or.reduce([outside] + [np.roll(outside, s, a) for a in range(mask.ndim) for s in (1, -1)])
+                 if cross else grow(outside, 1.0)) & free
+        if np.array_equal(grown, outside):
+            return ~outside
+        outside = grown
+
+
 def rms_radius(image: Image, mask: np.ndarray | None = None, max_points: int = 100_000) -> float:
     """RMS physical distance of the (masked) pixels from the grid's centre: a rotation by ``d`` radians moves
     them by about ``d * rms_radius`` (how angles and translations are put on one scale)."""

@@ -16,8 +16,7 @@ from typing import Callable
 import numpy as np
 
 from topomatch.stages.registration.histogram import Binning
-from topomatch.stages.registration.image import Image, foreground_mask
-from topomatch.stages.registration.structure import fill_holes
+from topomatch.stages.registration.image import Image, fill_holes, foreground_mask
 from topomatch.stages.registration.transform import euler_matrix, n_angles
 
 SEARCH_SIDE = 24
@@ -119,8 +118,7 @@ class SearchImages:
         return float(_accepted(values, inside, self.min_overlap if min_overlap is None else min_overlap)[0])
 
     def content_overlap(self, theta: np.ndarray) -> float:
-        """Fraction of the fixed image's content (Otsu foreground, holes filled) mapped onto the moving image's content
-        (holes filled: the inside of an outline drawing is its content; thirty-third round)."""
+        """Fraction of the fixed content mapped onto the moving content (Otsu foregrounds, holes filled: round 33)."""
         cells = self._cells(np.asarray(theta, dtype=np.float64), np.zeros((1, self.dim), dtype=np.intp))[0]
         both = np.count_nonzero(self._content_canvas[cells] & self._fixed_content)
         return both / max(1, int(np.count_nonzero(self._fixed_content)))

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from topomatch.stages.registration.image import Image, border, foreground_mask, gaussian_blur, grow, otsu_threshold
+from topomatch.stages.registration.image import Image, fill_holes, foreground_mask, gaussian_blur, grow, otsu_threshold
 from topomatch.stages.registration.interpolation import resample
 from topomatch.stages.registration.params import MetricSpec
 from topomatch.stages.registration.transform import RigidTransform
@@ -30,21 +30,6 @@ PLATEAU = 0.5
 more distinct intensities than a label map (``metric.discrete_levels``' default), is 0: two plateaus and a ramp
 between (a soft mask), not an inside (twenty-third round)."""
 RAMP_LEVELS = MetricSpec.model_fields["discrete_levels"].default
-
-
-def fill_holes(mask: np.ndarray, *, cross: bool = False) -> np.ndarray:
-    """``mask`` with every background region that does not reach the grid's border filled (8- / 26-connected
-    background, as ``scipy.ndimage.binary_fill_holes`` with a full structuring element; ``cross``: 4- / 6-connected, as
-    with its default one, so that a one-pixel outline with diagonal steps encloses its inside)."""
-    mask = np.asarray(mask, dtype=bool)
-    free = ~mask
-    outside = free & border(mask.shape)
-    while True:  # geodesic dilation of the border's background inside the background (np.roll's wrap meets the border)
-        grown = (np.logical_or.reduce([outside] + [np.roll(outside, s, a) for a in range(mask.ndim) for s in (1, -1)])
-                 if cross else grow(outside, 1.0)) & free
-        if np.array_equal(grown, outside):
-            return ~outside
-        outside = grown
 
 
 def once_per_image(compute):
@@ -149,12 +134,11 @@ def interior_spread(image: Image) -> float:
 def two_class_residual(image: Image) -> float:
     """The worse of ``image``'s two Otsu classes' variance over the squared difference of their means (an inverse
     squared contrast-to-noise ratio, unit-free): a mask or silhouette with noise s and contrast D scores (s / D)^2
-    whatever fraction of the grid it fills (2 % noise: 4e-4), an image with an inside far more (brain sections >=
-    0.004 on the corpus). Judged only where :func:`interior_structure` and :func:`interior_spread` cannot (both NaN:
-    an object that fills the grid, a tight field of view; both are kept on the image, so asking them again costs
-    nothing); NaN elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`). (Dividing by the total variance
-    instead made a silhouette filling 99 % of the grid read as structure: its total variance is little more than the
-    noise.)"""
+    whatever fraction of the grid it fills (2 % noise: 4e-4), an image with an inside far more (brain sections >= 0.004
+    on the corpus). Judged only where :func:`interior_structure` and :func:`interior_spread` cannot (both NaN: an object
+    that fills the grid, a tight field of view; both are kept on the image, so asking them again costs nothing); NaN
+    elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`). (Dividing by the total variance instead made a
+    silhouette filling 99 % of the grid read as structure: its total variance is little more than the noise.)"""
     if not (np.isnan(interior_structure(image)) and np.isnan(interior_spread(image))):
         return float("nan")
     data = image.data.ravel()

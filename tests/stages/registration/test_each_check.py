@@ -190,6 +190,21 @@ def test_content_is_the_lens_of_two_shifted_discs(d):
     assert ask(reg.check_content, run, np.r_[0.0, 45.0, 0.0]) == ["content"]  # lens 12 %
 
 
+@pytest.mark.parametrize("d", [0.0, 20.0, 45.0])
+def test_content_of_an_outline_drawing_is_its_inside(d):
+    """A disc against its outline drawn 2 pixels wide (a bright ring on black, as an outline image is; thirty-third
+    round): the ring's inside is content, so the measure is the lens of the two discs as above (before the round only
+    the ring counted and the aligned pair scored 0.1, flagged)."""
+    disc = disc_image()
+    yy, xx = np.mgrid[0:128, 0:128].astype(float)
+    r = np.hypot(xx - 63.5, yy - 63.5)
+    ring = disc.with_data(np.where((r < 30.0) & (r >= 28.0), 100.0, 0.0) + np.random.default_rng(1).normal(0, 2.0, r.shape))
+    run = make_run(disc, ring)
+    flagged = ask(reg.check_content, run, np.r_[0.0, d, 0.0])
+    assert run.measures["content"] == pytest.approx(lens_fraction(d, 30.0), abs=0.05)
+    assert flagged == ([] if lens_fraction(d, 30.0) >= 0.2 else ["content"])
+
+
 def test_flatness_finds_the_rotation_a_disc_leaves_undetermined(pd_run):
     """A disc centred on the grid looks the same at every angle about its centre: the measure does not fall along
     the rotation (ratio 0), and the flag names that direction: all angle, no translation. (Each image has noise of

@@ -6,10 +6,8 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from topomatch.stages.registration.image import Image
-from topomatch.stages.registration.image import gaussian_blur
-from topomatch.stages.registration.structure import (fill_holes, interior_spread, interior_structure, outline_gap,
-                                                     outline_in_view)
+from topomatch.stages.registration.image import Image, fill_holes, gaussian_blur
+from topomatch.stages.registration.structure import interior_spread, interior_structure, outline_gap, outline_in_view
 
 
 @pytest.mark.parametrize("shape", [(40, 50), (20, 25, 30)])
@@ -23,6 +21,8 @@ def test_gaussian_blur_and_fill_holes_equal_scipy(shape):
                                atol=1e-12)
     mask = ndimage.binary_dilation(rng.uniform(size=shape) < 0.05, iterations=2)
     assert np.array_equal(fill_holes(mask), ndimage.binary_fill_holes(mask, structure=np.ones((3,) * len(shape))))
+    ring = ~ndimage.binary_dilation(rng.uniform(size=shape) < 0.1, iterations=2)  # background with diagonal gaps
+    assert np.array_equal(fill_holes(ring, cross=True), ndimage.binary_fill_holes(ring))  # scipy's default: 4- / 6-
 
 
 @pytest.mark.parametrize("d", [2, 3])
