@@ -1424,6 +1424,13 @@ def montage(args, path: Path) -> None:
     print(f"montage of {len(cases)} cases: {path}")
 
 
+def attack_main(split: str, argv: list[str]) -> None:
+    """An attack script's command line: this module's (``--help``) on ``split`` by default, with JT and MI, ours and
+    elastix unless ``argv`` sets them (the attack has registered its split and kinds first)."""
+    defaults = {"--metrics": "jt,mi", "--methods": "ours,elastix", "--split": split}
+    main([x for k, v in defaults.items() if k not in argv for x in (k, v)] + argv)
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--split", choices=[*SPLIT_ORDER, "all"], default="all")

@@ -137,10 +137,7 @@ def main() -> None:
     """The corpus's command line (``registration_corpus.py --help``) on this split; its defaults here: JT and MI,
     ours and elastix."""
     register_split()
-    argv = sys.argv[1:]
-    defaults = {"--metrics": "jt,mi", "--methods": "ours,elastix"}
-    split = [] if "--split" in argv else ["--split", SPLIT]
-    corpus.main(split + [x for k, v in defaults.items() if k not in argv for x in (k, v)] + argv)
+    corpus.attack_main(SPLIT, sys.argv[1:])
 
 
 if __name__ == "__main__":

@@ -240,8 +240,7 @@ def main() -> None:
         WHEEL_DIR.append(Path(argv[i + 1]))
         del argv[i: i + 2]
     register_split()
-    defaults = {"--metrics": "jt,mi", "--methods": "ours,elastix", "--split": SPLIT}
-    corpus.main([x for k, v in defaults.items() if k not in argv for x in (k, v)] + argv)
+    corpus.attack_main(SPLIT, argv)
 
 
 if __name__ == "__main__":
