@@ -6,8 +6,8 @@ row's flags with the new measure are its recorded flags with ``content`` re-deci
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_content_probe.py \\
         benchmarks/results/registration_r31_ensemble_tune.json [--attack kinds|probability|sources] [--json OUT]
 
-Rows of ours (2D, with a recorded ``content`` measure) are rebuilt from the corpus's specs (``--attack``: the split
-registered by that attack's script first). Prints ok / FF / fw / silent before and after, and every row that
+Rows of ours (2D, with a recorded ``content`` measure) are rebuilt from the corpus's specs at the default
+``--cases-scale`` (``--attack``: the split registered by that attack's script first). Prints ok / FF / fw / silent before and after, and every row that
 changes class."""
 
 from __future__ import annotations

@@ -20,9 +20,10 @@ only:
   form of "the only structure is the outline"), plus noise;
 - ``t1``: the control.
 
-The regions are Voronoi cells in the moving image's physical space (their seeds drawn inside its brain mask), so
-they are not attached to the anatomy; the kinds above them carry the moved tissue maps and mask like the corpus's.
-A third of the non-control cases are swapped (the kind is the fixed image, the moved T1 the moving one). 2D MNI
+The regions are Voronoi cells in the kind image's own physical space (the moving grid; the fixed one when swapped),
+their seeds drawn inside its brain mask, so they are not attached to the anatomy; the kinds carry the tissue maps and
+mask like the corpus's. Non-control cases are swapped by the corpus's rule (the kind is the fixed image, the moved T1
+the moving one): 19 of 56 in 2D, 13 of 23 in 3D (the rule over 6-10 cases a source). 2D MNI
 sections get the corpus's tight frame (45-60 % of each axis) one time in four; 3D volumes get no thick slices (the
 regions are drawn on the moving grid). Correct = mean TRE <= 1 pixel (2D) / 1 mm (3D); counts per kind: ok / FF
 (correct, flagged) / fw (wrong, flagged) / silent (wrong, passed).
