@@ -1424,9 +1424,10 @@ def montage(args, path: Path) -> None:
     print(f"montage of {len(cases)} cases: {path}")
 
 
-def attack_main(split: str, argv: list[str]) -> None:
+def attack_main(split: str, argv: list[str], register: Callable[[], None] = lambda: None) -> None:
     """An attack script's command line: this module's (``--help``) on ``split`` by default, with JT and MI, ours and
-    elastix unless ``argv`` sets them (the attack has registered its split and kinds first)."""
+    elastix unless ``argv`` sets them, after ``register()`` has added the attack's splits and kinds."""
+    register()
     defaults = {"--metrics": "jt,mi", "--methods": "ours,elastix", "--split": split}
     main([x for k, v in defaults.items() if k not in argv for x in (k, v)] + argv)
 

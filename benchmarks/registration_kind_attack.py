@@ -134,12 +134,5 @@ def register_split() -> None:
     corpus.plan_case, corpus.maps_needed = plan_case, maps_needed
 
 
-def main() -> None:
-    """The corpus's command line (``registration_corpus.py --help``) on this split; its defaults here: JT and MI,
-    ours and elastix."""
-    register_split()
-    corpus.attack_main(SPLIT, sys.argv[1:])
-
-
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # the corpus's command line (registration_corpus.py --help) on this split
+    corpus.attack_main(SPLIT, sys.argv[1:], register_split)

@@ -79,11 +79,5 @@ def register_split() -> None:
     corpus.source_fields, corpus.maps_needed = source_fields, maps_needed
 
 
-def main() -> None:
-    """The corpus's command line (``registration_corpus.py --help``) on this split: JT and MI, ours and elastix."""
-    register_split()
-    corpus.attack_main(SPLIT, sys.argv[1:])
-
-
-if __name__ == "__main__":
-    main()
+if __name__ == "__main__":  # the corpus's command line (registration_corpus.py --help) on this split
+    corpus.attack_main(SPLIT, sys.argv[1:], register_split)

@@ -239,8 +239,7 @@ def main() -> None:
         i = argv.index("--wheels")
         WHEEL_DIR.append(Path(argv[i + 1]))
         del argv[i: i + 2]
-    register_split()
-    corpus.attack_main(SPLIT, argv)
+    corpus.attack_main(SPLIT, argv, register_split)
 
 
 if __name__ == "__main__":
