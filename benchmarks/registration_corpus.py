@@ -219,6 +219,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final34``: declared with the thirty-third round (the `content` test measures both images' content with its holes
   filled, 4-connected: the inside of an outline drawing is content), the design of ``final33``, fresh seeds 51xxx, run
   once with the round's code if its tune side and attacks pass, else with the code before it.
+- ``final35``: declared (cee55eb, branch ``r34-outline-opinion``) with a thirty-fourth round that was not merged (the
+  `label` test: a label map's object registered alone must end near the result), the design of ``final34``, fresh
+  seeds 56xxx, run once with that branch's code: its test flagged no row, and the rows re-run with this release's
+  code are identical, so it is a fresh measure of this release.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -302,7 +306,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 35)},  # final7 to final34: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 36)},  # final7 to final35: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -324,7 +328,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 35)},  # final8 to final34
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 36)},  # final8 to final35
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -449,6 +453,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final34", "mni", 3): 51103, ("final34", "mni15", 3): 51703, ("final34", "kmeans", 3): 51203,
          ("final34", "anatomical", 3): 51303, ("final34", "mni-axial", 2): 51102, ("final34", "mni-coronal", 2): 51402,
          ("final34", "mni-sagittal", 2): 51502, ("final34", "itk", 2): 51602,
+         ("final35", "mni", 3): 56103, ("final35", "mni15", 3): 56703, ("final35", "kmeans", 3): 56203,
+         ("final35", "anatomical", 3): 56303, ("final35", "mni-axial", 2): 56102, ("final35", "mni-coronal", 2): 56402,
+         ("final35", "mni-sagittal", 2): 56502, ("final35", "itk", 2): 56602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -465,7 +472,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
