@@ -7,8 +7,8 @@ row's flags with the new measure are its recorded flags with ``content`` re-deci
         benchmarks/results/registration_r31_ensemble_tune.json [--attack kinds|probability|sources] [--json OUT]
 
 Rows of ours (2D, with a recorded ``content`` measure) are rebuilt from the corpus's specs at the default
-``--cases-scale`` (``--attack``: the split registered by that attack's script first). Prints ok / FF / fw / silent before and after, and every row that
-changes class."""
+``--cases-scale`` (``--attack``: the split registered by that attack's script first). Prints ok / FF / fw / silent
+before and after, and every row that changes class."""
 
 from __future__ import annotations
 
@@ -27,22 +27,19 @@ import registration_corpus as corpus  # noqa: E402
 
 from topomatch.stages.registration.image import foreground_mask  # noqa: E402
 from topomatch.stages.registration.params import CheckSpec  # noqa: E402
-from topomatch.stages.registration.search import SEARCH_SAMPLES, SearchImages  # noqa: E402
+from topomatch.stages.registration.search import SearchImages  # noqa: E402
 
 MIN_CONTENT = CheckSpec().min_content
 
 
 def contents(fixed, moving, theta: np.ndarray) -> tuple[float, float]:
-    """(the measure with the Otsu foregrounds as they are, the measure with their holes filled: the round's)."""
+    """(the measure with the Otsu foregrounds as they are, as before the round; the round's, their holes filled)."""
     images = SearchImages(fixed, moving, center=fixed.center, min_overlap=0.25)
-    filled = images.content_overlap(theta)
-    fixed_small = fixed.shrink([max(1, int(images.spacing // s)) for s in fixed.spacing])
-    flat = np.arange(fixed_small.data.size)
-    if len(flat) > SEARCH_SAMPLES:  # the samples SearchImages draws
-        flat = np.sort(np.random.default_rng(0).choice(flat, SEARCH_SAMPLES, replace=False))
-    images._fixed_content = foreground_mask(fixed_small).ravel()[flat]
-    images._moving_content, images._pad = foreground_mask(images.moving_small), -1
-    return images.content_overlap(theta), filled
+    filled = images.content_overlap(theta)  # also pads the search copy's canvas for theta's cells
+    cells = images._cells(np.asarray(theta, dtype=np.float64), np.zeros((1, images.dim), dtype=np.intp))[0]
+    fixed_content = foreground_mask(images._fixed_small).ravel()[images._flat]
+    moving_content = np.pad(foreground_mask(images.moving_small), images._pad).ravel()
+    return np.count_nonzero(moving_content[cells] & fixed_content) / max(1, int(np.count_nonzero(fixed_content))), filled
 
 
 def verdict(row: dict, flags: set[str]) -> str:

@@ -5,8 +5,8 @@ beside it.
 
 The cases are the validation corpus's (``registration_corpus.py``: its sources, draws of rigid transforms, sections,
 frames, crops, noise and bias) in a split of their own, ``kinds`` (seeds 52xxx, drawn by no other script, declared
-before any of its results was seen; ``--split kinds-2``: seeds 53xxx, the same design), whose moving kinds are made here and added to the corpus's kinds for this run
-only:
+before any of its results was seen; ``--split kinds-2``, ``kinds-3``, ``kinds-4``: seeds 53xxx, 54xxx, 57xxx, the same
+design, :data:`SPLIT_SEEDS`), whose moving kinds are made here and added to the corpus's kinds for this run only:
 
 - ``atlas``: an atlas-like parcellation, the tissue classes (CSF, GM, WM, as the corpus's ``labels``) of each of
   6-20 regions (Voronoi cells of seeds drawn inside the brain), their labels a random permutation of 1..3R (18-60

@@ -68,10 +68,9 @@ class SearchImages:
         self._P = (fixed_small.points(flat) - self.center).T  # (d, n)
         self._fbk = (fb.index(fixed_small.data.ravel()[flat]) * mb.bins).astype(np.int32)  # int32: half the traffic
         self.n_samples = self._P.shape[1]
-        self._fixed_content = fill_holes(foreground_mask(fixed_small), cross=True).ravel()[flat]
+        self._fixed_small, self._flat = fixed_small, flat  # the content test's, made when it asks (content_overlap)
         self._inv = np.linalg.inv(self.moving_small.index_matrix)
         self._moving_bins_small = mb.index(self.moving_small.data)
-        self._moving_content = fill_holes(foreground_mask(self.moving_small), cross=True)
         self._pad = -1
 
     def step_vectors(self, steps: np.ndarray) -> np.ndarray:
@@ -79,12 +78,11 @@ class SearchImages:
         return np.asarray(steps) @ self.moving_small.index_matrix.T
 
     def _canvas(self, pad: int) -> None:
-        """(Re)build the padded moving bins (outside: ``K``) and content with at least ``pad`` cells a side."""
+        """(Re)build the padded moving bins (outside: ``K``) with at least ``pad`` cells a side."""
         if pad <= self._pad:
             return
         bins = np.pad(self._moving_bins_small.astype(np.int32), pad, constant_values=self.K)
-        content = np.pad(self._moving_content, pad)
-        self._pad, self._bins_canvas, self._content_canvas = pad, bins.ravel(), content.ravel()
+        self._pad, self._bins_canvas = pad, bins.ravel()
         self._strides = np.cumprod((1,) + bins.shape[::-1][:-1])  # per ITK axis
 
     def _cells(self, theta: np.ndarray, steps: np.ndarray) -> np.ndarray:
@@ -120,8 +118,9 @@ class SearchImages:
     def content_overlap(self, theta: np.ndarray) -> float:
         """Fraction of the fixed content mapped onto the moving content (Otsu foregrounds, holes filled: round 33)."""
         cells = self._cells(np.asarray(theta, dtype=np.float64), np.zeros((1, self.dim), dtype=np.intp))[0]
-        both = np.count_nonzero(self._content_canvas[cells] & self._fixed_content)
-        return both / max(1, int(np.count_nonzero(self._fixed_content)))
+        fixed = fill_holes(foreground_mask(self._fixed_small), cross=True).ravel()[self._flat]
+        moving = np.pad(fill_holes(foreground_mask(self.moving_small), cross=True), self._pad).ravel()
+        return np.count_nonzero(moving[cells] & fixed) / max(1, int(np.count_nonzero(fixed)))
 
 
 @dataclass(frozen=True, eq=False)
