@@ -43,23 +43,22 @@ def shannon_entropy(p: np.ndarray, axis: int = -1) -> np.ndarray:
     return -terms.sum(axis=axis)
 
 
-def tsallis_entropy(p: np.ndarray, alpha: float, axis: int = -1) -> np.ndarray:
-    """Tsallis entropy ``(sum p^a - 1) / (1 - a)`` along ``axis``; Shannon at ``a = 1``."""
+def _of_order(p: np.ndarray, alpha: float, axis: int, of_power_sum) -> np.ndarray:
+    """``of_power_sum(sum p^alpha)`` along ``axis``; Shannon's entropy at ``alpha = 1``."""
     _check_alpha(alpha)
     p = np.asarray(p, dtype=np.float64)
-    if abs(alpha - 1.0) < _ONE:
-        return shannon_entropy(p, axis)
-    return (_power_sum(p, alpha, axis) - 1.0) / (1.0 - alpha)
+    return shannon_entropy(p, axis) if abs(alpha - 1.0) < _ONE else of_power_sum(_power_sum(p, alpha, axis))
+
+
+def tsallis_entropy(p: np.ndarray, alpha: float, axis: int = -1) -> np.ndarray:
+    """Tsallis entropy ``(sum p^a - 1) / (1 - a)`` along ``axis``; Shannon at ``a = 1``."""
+    return _of_order(p, alpha, axis, lambda s: (s - 1.0) / (1.0 - alpha))
 
 
 def renyi_entropy(p: np.ndarray, alpha: float, axis: int = -1) -> np.ndarray:
     """Renyi entropy ``log(sum p^a) / (1 - a)`` along ``axis``; Shannon at ``a = 1``."""
-    _check_alpha(alpha)
-    p = np.asarray(p, dtype=np.float64)
-    if abs(alpha - 1.0) < _ONE:
-        return shannon_entropy(p, axis)
     with np.errstate(divide="ignore"):
-        return np.log(_power_sum(p, alpha, axis)) / (1.0 - alpha)
+        return _of_order(p, alpha, axis, lambda s: np.log(s) / (1.0 - alpha))
 
 
 def _jensen(entropy, P: np.ndarray, weights: np.ndarray, alpha: float) -> float:
@@ -127,9 +126,7 @@ def jensen_tsallis_histogram(h: np.ndarray, alpha: float = 2.0, weights: Weights
 def jensen_renyi_histogram(h: np.ndarray, alpha: float = 2.0, weights: Weights = "histogram") -> float:
     """Jensen-Renyi divergence of the conditional distributions of a joint histogram (n, k)."""
     P, w = conditionals(h, weights)
-    if len(w) == 0:
-        return float("nan")
-    return jensen_renyi(P, w, alpha)
+    return jensen_renyi(P, w, alpha) if len(w) else float("nan")
 
 
 def mutual_information(h: np.ndarray) -> float:

@@ -1,10 +1,8 @@
 """Joint intensity histograms of a fixed image and a rigidly transformed moving image, 2D and 3D alike.
 
-:class:`JointHistogram` does once all that does not depend on the transform (the fixed samples: a mask, a fixed-seed
-subset, a jitter within their pixels; their physical positions about the rotation centre and their bins; the moving
-image in bin units); an evaluation is then one compiled pass (``_histogram.c``; numpy without it) of the rigid map,
-N-linear interpolation and binning (``linear``, ``parzen`` or partial volume ``pv``). Samples that leave the moving grid
-are left out and counted. See docs/registration.md, "The joint histogram"."""
+:class:`JointHistogram` does once all that does not depend on the transform (its fixed samples, their positions and
+bins; the moving image in bin units); an evaluation is then one compiled pass (``_histogram.c``; numpy without it) of
+the rigid map, N-linear interpolation and binning. See docs/registration.md, "The joint histogram"."""
 
 from __future__ import annotations
 
@@ -102,9 +100,8 @@ class JointHistogram:
         else:
             values = fixed.data.ravel()[flat]
         self.n_samples = idx.shape[1]
-        P = np.zeros((3, self.n_samples))
-        P[: self.dim] = (fixed.physical(idx.T) - self.center).T
-        self._P = P  # (3, n): a 2D image is a 3D image of one slice for the compiled pass
+        self._P = np.zeros((3, self.n_samples))  # (3, n): a 2D image is a 3D image of one slice for the compiled pass
+        self._P[: self.dim] = (fixed.physical(idx.T) - self.center).T
         self._fbk = np.ascontiguousarray(fixed_binning.index(values) * moving_binning.bins, dtype=np.int64)
         self.moving = moving
         self._inv = np.linalg.inv(moving.index_matrix)

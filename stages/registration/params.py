@@ -52,11 +52,9 @@ class MetricSpec(_Named):
 
     def label(self) -> str:
         """``jt(alpha=2 histogram)``, ``tmi(alpha=2)``, ``mi``."""
-        if self.name in ("jt", "jr"):
-            return f"{self.name}(alpha={self.alpha:g} {self.weights})"
-        if self.name == "tmi":
-            return f"{self.name}(alpha={self.alpha:g})"
-        return self.name
+        if self.name == "mi":
+            return self.name
+        return f"{self.name}(alpha={self.alpha:g}{' ' + self.weights if self.name in ('jt', 'jr') else ''})"
 
     def for_outline(self) -> "MetricSpec":
         """The measure of an outline-only pair: ``alpha`` replaced by ``outline_alpha`` (jt, jr, tmi)."""

@@ -251,12 +251,9 @@ class _Run:
         grid = np.stack(np.meshgrid(*[offsets] * self.dim, indexing="ij"), axis=-1).reshape(-1, self.dim)
         centres = [t_init] + [initial_translation(self.fixed, self.moving, m) for m in ("moments", "geometry")]
         centres.append(np.zeros(self.dim))
-        scored = [(coarse(theta0), 0, theta0)]
-        for c in centres:
-            for off in grid:
-                theta = np.r_[zeros, c + off]
-                scored.append((coarse(theta), len(scored), theta))
-        scored = sorted((x for x in scored if math.isfinite(x[0])), key=lambda x: (-x[0], x[1]))
+        thetas = [theta0] + [np.r_[zeros, c + off] for c in centres for off in grid]
+        scored = [(value, i, theta) for i, theta in enumerate(thetas) if math.isfinite(value := coarse(theta))]
+        scored.sort(key=lambda x: (-x[0], x[1]))
         if not scored:
             return theta0
         chosen: list[np.ndarray] = []
@@ -375,8 +372,7 @@ class _Run:
         c = self.params.check
         if self.dim == 2:
             rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
-            quarter = math.pi / c.probes / 2
-            polish = [np.array([-quarter]), np.array([0.0]), np.array([quarter])]
+            polish = [np.array([s * math.pi / c.probes / 2]) for s in (-1.0, 0.0, 1.0)]  # quarter probe steps
         else:
             rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
                                                    for a in c.angles])
@@ -639,10 +635,9 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
 
 def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     """Another basin is better (:func:`_better_basin`): found by the grid's ``check.candidates`` best transforms
-    (adopted with ``check.retry``), else by :meth:`_Run.shortlisted`, adopted too (thirty-second round; from the
-    thirteenth only on a pair measured at order 1: on masks read as images it had added silent errors); a fixed mask
-    sampled over every pixel, adopted where higher at full resolution (thirtieth round); on a pair read as an image that no
-    start search began (``check.start_search``), the 3D start search's end, which only flags (own stream, no history)."""
+    (adopted with ``check.retry``), else by :meth:`_Run.shortlisted` (adopted too); a fixed mask sampled over every
+    pixel, adopted where higher at full resolution; on a pair read as an image that no start search began
+    (``check.start_search``), the 3D start search's end, which only flags (own stream, no history)."""
     if not (c := run.params.check).search:
         return []
     probes = run.candidates(theta)

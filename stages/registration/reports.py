@@ -186,7 +186,7 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
     for image, cases in data.items():
         cols = len(cases)
         fig, axes = plt.subplots(2, cols, figsize=(4.4 * cols, 6.4), squeeze=False)
-        for c, (key, by_method) in enumerate(cases.items()):
+        for c, by_method in enumerate(cases.values()):
             methods = list(by_method)
             width = 0.8 / max(len(methods), 1)
             names, truth = by_method[methods[0]][0][:2]
@@ -356,14 +356,9 @@ def overlay_figure(pairs, **margins):
 def registered_items(results, method: str, limit: int) -> list[tuple[Any, Any]]:
     """Up to ``limit`` (item result, its last registration whose method contains ``method``) pairs of
     the items that succeeded with a fixed and a moving image."""
-    chosen = []
-    for r in results:
-        if not r.ok or r.final("fixed") is None or r.final("moving") is None:
-            continue
-        regs = [res.registration for res in _of_type(r, RegisterResult) if method in res.registration.method]
-        if regs:
-            chosen.append((r, regs[-1]))
-    return chosen[:limit]
+    regs = [(r, [res.registration for res in _of_type(r, RegisterResult) if method in res.registration.method])
+            for r in results if r.ok and r.final("fixed") is not None and r.final("moving") is not None]
+    return [(r, found[-1]) for r, found in regs if found][:limit]
 
 
 class OverlayParams(Params):
@@ -450,7 +445,6 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
     unique: dict[tuple, tuple[str, Any]] = {}
     for r in results:
         for ev in _of_type(r, EvaluateResult):
-            # a stage before a swept one (e.g. SimpleITK before register.metric.name) repeats per sweep point: count once
             unique.setdefault((_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values())), (_label(r), ev))
     evaluations = list(unique.values())
     if not evaluations:

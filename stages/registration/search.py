@@ -56,8 +56,8 @@ class SearchImages:
 
     def __init__(self, fixed: Image, moving: Image, *, center, min_overlap: float, spacing: float | None = None):
         spacing = search_spacing([fixed, moving]) if spacing is None else spacing
-        small = [im.shrink([max(1, int(spacing // s)) for s in im.spacing]) for im in (fixed, moving)]
-        fixed_small, self.moving_small = small
+        fixed_small, self.moving_small = (im.shrink([max(1, int(spacing // s)) for s in im.spacing])
+                                          for im in (fixed, moving))
         self.spacing, self.dim, self.center = spacing, fixed.dim, np.asarray(center, dtype=np.float64)
         self.min_overlap = float(min_overlap)
         fb, mb = Binning.of(fixed.data, SEARCH_BINS), Binning.of(moving.data, SEARCH_BINS)
@@ -217,17 +217,12 @@ def flatness(score: Callable[[np.ndarray], float], theta: np.ndarray, *, dim: in
     radius of the content): :func:`directions` (axes and diagonals), translations (every 10 degrees in 2D, the 13
     directions of 3-space in 3D) and the pure rotations. The drop along u is ``score(theta) - mean(score(theta +-
     reach u))``: at ``reach`` a determined optimum has fallen in every direction, an undetermined one has not in its
-    flat direction. (A direction fitted to the local curvature was tried and dropped: on coarse copies of real
-    images it found valleys that correct results sit in.) Returns the smallest drop over the largest (clipped to
-    [0, 1]) and the flattest direction (p,)."""
+    flat direction. Returns the smallest drop over the largest (clipped to [0, 1]) and the flattest direction (p,)."""
     theta = np.asarray(theta, dtype=np.float64)
     k, p = n_angles(dim), len(theta)
     here = score(theta)
-    if dim == 2:
-        a = np.radians(np.arange(0, 180, 10))
-        translations = np.column_stack([np.cos(a), np.sin(a)])
-    else:
-        translations = directions(3)
+    a = np.radians(np.arange(0, 180, 10))  # 2D: every 10 degrees; 3D: the 13 directions of 3-space
+    translations = np.column_stack([np.cos(a), np.sin(a)]) if dim == 2 else directions(3)
     dirs = np.vstack([directions(p), np.hstack([np.zeros((len(translations), k)), translations]), np.eye(p)[:k]])
     if not math.isfinite(here):
         return 0.0, dirs[0]

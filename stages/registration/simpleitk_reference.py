@@ -53,11 +53,15 @@ class SimpleITKParams(Params):
         return self
 
 
-def _registration_method(params: "SimpleITKParams", F, M, transform):
-    """SimpleITK's ``ImageRegistrationMethod`` set up by ``params`` as the module docstring says for the rigid
-    ``transform``, with the initial transform and a one-element list counting the iterations."""
+def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleITKParams()) -> Registration:
+    """Register with SimpleITK (Mattes MI, Euler2D / Euler3D, a pyramid: module docstring), 2D or 3D, the images'
+    geometry kept: the transform about the fixed grid's centre, ``value`` the final Mattes metric (negative MI, as
+    SimpleITK minimises it), flagged only for too little overlap or an exception (SimpleITK has no flag)."""
     import SimpleITK as sitk
 
+    t0 = time.perf_counter()
+    F, M = to_sitk(fixed), to_sitk(moving)
+    rigid = sitk.Euler2DTransform() if fixed.dim == 2 else sitk.Euler3DTransform()
     reg = sitk.ImageRegistrationMethod()
     if params.threads is not None:
         reg.SetNumberOfThreads(params.threads)
@@ -65,43 +69,25 @@ def _registration_method(params: "SimpleITKParams", F, M, transform):
     reg.SetMetricSamplingStrategy(reg.RANDOM)
     reg.SetMetricSamplingPercentage(params.sampling, params.sampling_seed)
     reg.SetInterpolator(sitk.sitkLinear)
+    steps = dict(learningRate=params.learning_rate, numberOfIterations=params.iterations)
+    window = dict(convergenceMinimumValue=params.convergence, convergenceWindowSize=10)
     if params.optimizer == "regular_step":
-        reg.SetOptimizerAsRegularStepGradientDescent(learningRate=params.learning_rate, minStep=params.min_step,
-                                                     numberOfIterations=params.iterations,
+        reg.SetOptimizerAsRegularStepGradientDescent(**steps, minStep=params.min_step,
                                                      relaxationFactor=params.relaxation,
                                                      gradientMagnitudeTolerance=params.gradient_tolerance)
     elif params.optimizer == "gradient_descent":
-        reg.SetOptimizerAsGradientDescent(learningRate=params.learning_rate, numberOfIterations=params.iterations,
-                                          convergenceMinimumValue=params.convergence, convergenceWindowSize=10,
-                                          estimateLearningRate=reg.EachIteration)
+        reg.SetOptimizerAsGradientDescent(**steps, **window, estimateLearningRate=reg.EachIteration)
     else:
-        reg.SetOptimizerAsConjugateGradientLineSearch(learningRate=params.learning_rate,
-                                                      numberOfIterations=params.iterations,
-                                                      convergenceMinimumValue=params.convergence,
-                                                      convergenceWindowSize=10)
+        reg.SetOptimizerAsConjugateGradientLineSearch(**steps, **window)
     reg.SetOptimizerScalesFromPhysicalShift()
     reg.SetShrinkFactorsPerLevel(list(params.shrink))
     reg.SetSmoothingSigmasPerLevel(list(params.smoothing))
     reg.SmoothingSigmasAreSpecifiedInPhysicalUnitsOn()
-    mode = {"geometry": sitk.CenteredTransformInitializerFilter.GEOMETRY,
-            "moments": sitk.CenteredTransformInitializerFilter.MOMENTS}[params.init]
-    initial = sitk.CenteredTransformInitializer(F, M, transform, mode)
+    mode = getattr(sitk.CenteredTransformInitializerFilter, params.init.upper())  # GEOMETRY, MOMENTS
+    initial = sitk.CenteredTransformInitializer(F, M, rigid, mode)
     reg.SetInitialTransform(initial, inPlace=False)
     iterations = [0]
     reg.AddCommand(sitk.sitkIterationEvent, lambda: iterations.__setitem__(0, iterations[0] + 1))
-    return reg, initial, iterations
-
-
-def sitk_register(fixed: Image, moving: Image, params: SimpleITKParams = SimpleITKParams()) -> Registration:
-    """Register with SimpleITK (Mattes MI, Euler2D / Euler3D, a pyramid), 2D or 3D, the images' geometry kept: the
-    transform about the fixed grid's centre, ``value`` the final Mattes metric (negative MI, as SimpleITK minimises
-    it), flagged only for too little overlap or an exception (SimpleITK has no flag)."""
-    import SimpleITK as sitk
-
-    t0 = time.perf_counter()
-    F, M = to_sitk(fixed), to_sitk(moving)
-    reg, initial, iterations = _registration_method(params, F, M, sitk.Euler2DTransform() if fixed.dim == 2
-                                                    else sitk.Euler3DTransform())
     start = RigidTransform.from_sitk(initial, fixed.center)
     method = f"simpleitk/mattes({params.optimizer})"
     try:

@@ -112,14 +112,10 @@ def interior_spread(image: Image) -> float:
     """Spread of the intensities inside the object over the object's contrast with its background (unit-free,
     >= 0): ``(q90 - q10) / |median(core) - median(background core)|`` on :func:`analysed_copy`, the core being the
     Otsu content (:func:`~.image.foreground_mask`, holes not filled) and the background core the rest, each eroded
-    by one pixel (no edge pixel in either).
-
-    A mask or silhouette at one value plus Gaussian noise of deviation s scores 2.56 s' / contrast (s' the block
-    average's deviation), a binary image 0 whatever its shape: what it says is whether the object's inside has
-    intensities of its own, where :func:`interior_structure` asks where its edges lie (and is misled by an outline
-    with concavities or thin parts). NaN when the content fills the grid, either core has fewer than 10 pixels, or
-    less than :data:`SOLID` of the object (:func:`object_mask`) is content: a binary image whose object has dark
-    regions inside (a thresholded image) has structure inside, and 0 spread."""
+    by one pixel; a noisy mask scores 2.56 times its (block-averaged) noise over its contrast, a binary image 0
+    (docs/registration.md, ``outline``, fourth round). NaN when the content fills the grid, either core has fewer
+    than 10 pixels, or less than :data:`SOLID` of the object (:func:`object_mask`) is content (a thresholded image:
+    structure inside)."""
     small = analysed_copy(image)
     content = foreground_mask(small)
     core, back = ~grow(~content, 1.0), ~grow(content, 1.0)
@@ -135,10 +131,9 @@ def two_class_residual(image: Image) -> float:
     """The worse of ``image``'s two Otsu classes' variance over the squared difference of their means (an inverse
     squared contrast-to-noise ratio, unit-free): a mask or silhouette with noise s and contrast D scores (s / D)^2
     whatever fraction of the grid it fills (2 % noise: 4e-4), an image with an inside far more (brain sections >= 0.004
-    on the corpus). Judged only where :func:`interior_structure` and :func:`interior_spread` cannot (both NaN: an object
-    that fills the grid, a tight field of view; both are kept on the image, so asking them again costs nothing); NaN
-    elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`). (Dividing by the total variance instead made a
-    silhouette filling 99 % of the grid read as structure: its total variance is little more than the noise.)"""
+    on the corpus; docs/registration.md, ``outline``, sixth round). Judged only where :func:`interior_structure` and
+    :func:`interior_spread` cannot (both NaN: an object that fills the grid, a tight field of view; both are kept on
+    the image); NaN elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`)."""
     if not (np.isnan(interior_structure(image)) and np.isnan(interior_spread(image))):
         return float("nan")
     data = image.data.ravel()

@@ -1,11 +1,8 @@
-"""The rigid transform of 2D and 3D registration, in ITK's convention (SimpleITK's ``Euler2DTransform`` /
-``Euler3DTransform``), on physical points.
-
-``T(p) = R (p - c) + c + t``, ``c`` the fixed grid's centre, ``fixed(p) ~ moving(T(p))``; ``parameters`` are
-SimpleITK's, rotation first, radians: 2D ``(angle, tx, ty)`` with ``R(a) = [[cos a, -sin a], [sin a, cos a]]``, 3D
-``(ax, ay, az, tx, ty, tz)`` with ``R = Rz(az) Rx(ax) Ry(ay)`` (``ComputeZYX`` off). The dimensions differ only in this
-parametrisation. The thesis's ``R = [[cos a, sin a], [-sin a, cos a]]`` is ITK's ``R(-a)`` (:func:`from_thesis`). See
-docs/registration.md, "Conventions"."""
+"""The rigid transform of 2D and 3D registration on physical points, ``T(p) = R (p - c) + c + t`` (``c`` the fixed
+grid's centre, ``fixed(p) ~ moving(T(p))``), in ITK's convention: SimpleITK's ``Euler2DTransform`` (``R(a) = [[cos a,
+-sin a], [sin a, cos a]]``) and ``Euler3DTransform`` (``R = Rz(az) Rx(ax) Ry(ay)``, ``ComputeZYX`` off), parameters as
+:class:`RigidTransform` says. The thesis's R is ITK's ``R(-a)`` (:func:`from_thesis`). See docs/registration.md,
+"Conventions"."""
 
 from __future__ import annotations
 
