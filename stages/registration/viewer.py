@@ -79,11 +79,12 @@ def slice_viewer(fixed: np.ndarray, before: np.ndarray, after: np.ndarray, spaci
     mlo, mhi = display_window(np.concatenate([before.ravel(), after.ravel()]))
     payload = {"shape": list(fixed.shape), "spacing": spacing, "fixed": _bytes(fixed, lo, hi),
                "before": _bytes(before, mlo, mhi), "after": _bytes(after, mlo, mhi)}
-    views = [(0, 1, "")] if fixed.ndim == 2 else [(*(b for b in range(3) if b != a), f"{'kji'[a]} (array axis {a})")
-                                                  for a in range(3)]  # the array axes drawn down and across, a label
+    views = [(fixed.shape[1], fixed.shape[0], spacing[1], spacing[0], "")] if fixed.ndim == 2 else [
+        (fixed.shape[2], fixed.shape[1], spacing[2], spacing[1], "k (array axis 0)"),
+        (fixed.shape[2], fixed.shape[0], spacing[2], spacing[0], "j (array axis 1)"),
+        (fixed.shape[1], fixed.shape[0], spacing[1], spacing[0], "i (array axis 2)")]
     panels = []
-    for k, (down, across, label) in enumerate(views):
-        w, h, sx, sy = fixed.shape[across], fixed.shape[down], spacing[across], spacing[down]
+    for k, (w, h, sx, sy, label) in enumerate(views):
         scale = 320 / max(w * sx, h * sy)
         slider = "" if fixed.ndim == 2 else (
             f"<br><label>{label} slice <input class='slice' type='range' min='0' max='{fixed.shape[k] - 1}' "
