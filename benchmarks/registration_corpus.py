@@ -223,6 +223,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   `label` test: a label map's object registered alone must end near the result), the design of ``final34``, fresh
   seeds 56xxx, run once with that branch's code: its test flagged no row, and the rows re-run with this release's
   code are identical, so it is a fresh measure of this release.
+- ``final36``: declared (2026-12-06, fifth session, branch ``r35-label``) with the thirty-fourth round's label test
+  rebased on the thirty-third round's release, before any run of it, the design of ``final35``, fresh seeds 60xxx;
+  run once with whichever code ``kinds-5`` decides (``registration_kind_attack.py``: merged if it passes there, else
+  the release without it).
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -306,7 +310,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 36)},  # final7 to final35: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 37)},  # final7 to final36: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -328,7 +332,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 36)},  # final8 to final35
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 37)},  # final8 to final36
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -456,6 +460,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final35", "mni", 3): 56103, ("final35", "mni15", 3): 56703, ("final35", "kmeans", 3): 56203,
          ("final35", "anatomical", 3): 56303, ("final35", "mni-axial", 2): 56102, ("final35", "mni-coronal", 2): 56402,
          ("final35", "mni-sagittal", 2): 56502, ("final35", "itk", 2): 56602,
+         ("final36", "mni", 3): 60103, ("final36", "mni15", 3): 60703, ("final36", "kmeans", 3): 60203,
+         ("final36", "anatomical", 3): 60303, ("final36", "mni-axial", 2): 60102, ("final36", "mni-coronal", 2): 60402,
+         ("final36", "mni-sagittal", 2): 60502, ("final36", "itk", 2): 60602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -472,7 +479,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12

@@ -45,12 +45,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws, methods and scoring)
 
 SPLIT = "kinds"
-SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000, "kinds-3": 54000, "kinds-4": 57000}
+SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000, "kinds-3": 54000, "kinds-4": 57000, "kinds-5": 58000,
+               "kinds-6": 59000}
 """The splits and their seeds' base (``kinds-2``: the same design, declared after ``kinds`` had run once, before any
 code changed; run once with the same release; ``kinds-3``: the same design, declared with the thirty-third round,
 which ``kinds`` and ``kinds-2`` motivated, run once with its code; ``kinds-4``: declared on the branch of a
 thirty-fourth round that was not merged, run once with its code, whose one test flagged no row: a fresh measure of
-this release)."""
+this release; ``kinds-5`` and ``kinds-6``: the same design, declared on 2026-12-06 (fifth session, branch
+``r35-label``) before any run, to be run with ``--kinds atlas,regions --cases-scale 5``, the label kinds only, five
+times as many: ``kinds-5`` decides the thirty-fourth round (its label test, rebased on the thirty-third round's
+release) and ``kinds-6`` then measures what was decided. The rule, fixed here: the round is merged if on
+``kinds-5``, run once with its code, its label test catches at least one silent error (a wrong result that every
+other test passes) in some dimension and metric, and in each dimension and metric (JT, MI) the correct results that
+only it flags are at most 1 % of that dimension's cases; the classes without it are read from the same rows (the test
+only adds a flag))."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
 SOURCES = {3: [("mni", 10), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
            2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 10)]}

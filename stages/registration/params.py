@@ -222,6 +222,11 @@ class CheckSpec(Params):
                                          "with that measure)")
     mi_agreement: float = Field(1.0, ge=0, allow_inf_nan=False, description="with JT (alpha 2, histogram weights): "
                                 "flag a result farther than this (physical units) from MI's climb from it (0: off)")
+    label: float = Field(2.0, ge=0, allow_inf_nan=False, description="flag a result farther than this (physical "
+                         "units) from the registration of the pair with each label map (plateau share >= "
+                         "label_plateau, three values or more) replaced by its object (0: off)")
+    label_plateau: float = Field(0.2, gt=0, le=1, description="an image whose object has at least this share of "
+                                 "exact plateaus is read as a label map by the label test")
     margin: float = Field(0.005, ge=0, description="relative margin by which a probe must win to flag the result")
     candidates: int = Field(3, ge=1, description="best probes refined and compared with the result")
     shortlist: int = Field(10, ge=0, description="when the candidates find no better basin, the best of this many "

@@ -26,7 +26,8 @@ from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
 from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure,
-                                                     once_per_image, outline_gap, outline_in_view, two_class_residual)
+                                                     once_per_image, outline_gap, outline_in_view, plateau_share,
+                                                     two_class_residual)
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
@@ -509,6 +510,27 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
                               f"compare with --metric {second}")]
 
 
+def check_label(run: _Run, theta, value, stop) -> list[Flag]:
+    """A label map whose inner boundaries mislead the measure (the kind attack's parcellations): with each image read
+    as a label map (:func:`~.structure.plateau_share` at least ``check.label_plateau``, three values or more)
+    replaced by its object, the pair registered again ends more than ``check.label`` from the result and passes its own
+    self-check (the outline's own answer, right where the parcels fooled the measure: docs/registration.md)."""
+    c = run.params.check
+    pair = {"fixed": run.fixed, "moving": run.moving}
+    labels = [r for r, im in pair.items() if plateau_share(im) >= c.label_plateau and distinct_levels(im, 2) > 2]
+    if c.label <= 0 or run.outline_only or not labels:
+        return []
+    for r in labels:
+        pair[r] = pair[r].with_data((pair[r].data > pair[r].data.min()).astype(np.float64))
+    outline = register(pair["fixed"], pair["moving"], run.params)  # an answer its own self-check does not trust: none
+    apart = run.measures["label"] = run.distance(np.asarray(outline.transform.parameters), theta)
+    if apart <= c.label or not outline.ok:
+        return []
+    return [Flag("label", f"the {' and '.join(labels)} image reads as a label map, and its object alone registers "
+                          f"{apart:.2f} units from the result (label {c.label:g}): its inner boundaries may pull the "
+                          f"measure off the outline's pose; check the overlay")]
+
+
 def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
     """The result is not pinned down to ``check.stability``: the finest level run again from it on another sample
     of the same images (another subset, another jitter) ends farther away (a broad or flat optimum: a silhouette
@@ -701,7 +723,8 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
 
 CHECKS: tuple[Callable[..., list[Flag]], ...] = (
     check_start, check_overlap, check_bounds, check_chance, check_gain, check_consistency, check_stability,
-    check_agreement, check_overlap_bound, check_content, check_outline, check_prominence, check_flatness, check_capture)
+    check_agreement, check_label, check_overlap_bound, check_content, check_outline, check_prominence, check_flatness,
+    check_capture)
 """The self-check, in order; after ``check_overlap`` flags an undefined measure nothing else is asked."""
 
 

@@ -81,6 +81,19 @@ def outline_in_view(image: Image, other: Image | None = None, transform=None) ->
     return float(inside / (inside + cut)) if inside + cut > 0 else float("nan")
 
 
+@once_per_image
+def plateau_share(image: Image) -> float:
+    """Share of the object's pixels (:func:`object_mask`) equal to their next neighbour along every axis: exact
+    plateaus (label maps 0.38-0.94 on the corpus and the kind attack; an image with noise 0, a uint8 PNG slice 0.002)."""
+    equal = np.ones(image.data.shape, dtype=bool)
+    for axis in range(image.data.ndim):
+        x, e = np.moveaxis(image.data, axis, 0), np.zeros(image.data.shape, dtype=bool)
+        np.moveaxis(e, axis, 0)[:-1] = x[:-1] == x[1:]
+        equal &= e
+    obj = object_mask(image)
+    return float(equal[obj].mean()) if obj.any() else 0.0
+
+
 def distinct_levels(image: Image, limit: int, samples: int = 65536) -> int:
     """How many distinct intensities ``image`` holds, counted up to ``limit + 1`` on an evenly strided subset of at
     most ``samples`` voxels (an image with noise shows thousands there; a label map or thresholded mask its few)."""
