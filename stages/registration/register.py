@@ -515,10 +515,10 @@ def check_label(run: _Run, theta, value, stop) -> list[Flag]:
     as a label map (:func:`~.structure.plateau_share` at least ``check.label_plateau``, three values or more)
     replaced by its object, the pair registered again ends more than ``check.label`` from the result and passes its own
     self-check (the outline's own answer, right where the parcels fooled the measure: docs/registration.md)."""
-    c = run.params.check
-    pair = {"fixed": run.fixed, "moving": run.moving}
-    labels = [r for r, im in pair.items() if plateau_share(im) >= c.label_plateau and distinct_levels(im, 2) > 2]
-    if c.label <= 0 or run.outline_only or not labels:
+    c, pair = run.params.check, {"fixed": run.fixed, "moving": run.moving}
+    if c.label <= 0 or run.outline_only:
+        return []
+    if not (labels := [r for r, im in pair.items() if plateau_share(im) >= c.label_plateau and distinct_levels(im, 2) > 2]):
         return []
     for r in labels:
         pair[r] = pair[r].with_data((pair[r].data > pair[r].data.min()).astype(np.float64))

@@ -18,6 +18,7 @@ from topomatch.stages.registration import register as reg
 from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.misalign import moved
 from topomatch.stages.registration.params import RegisterParams, for_dimension
+from topomatch.stages.registration.structure import object_mask
 from topomatch.stages.registration.transform import RigidTransform
 
 TRUTH = np.array([math.radians(8.0), 6.0, -4.0])  # (angle in radians, tx, ty): the run's parameters
@@ -203,6 +204,29 @@ def test_content_of_an_outline_drawing_is_its_inside(d):
     flagged = ask(reg.check_content, run, np.r_[0.0, d, 0.0])
     assert run.measures["content"] == pytest.approx(lens_fraction(d, 30.0), abs=0.05)
     assert flagged == ([] if lens_fraction(d, 30.0) >= 0.2 else ["content"])
+
+
+def test_label_registers_a_label_maps_object_and_flags_a_result_away_from_it(pd_slice):
+    """A three-class label map of the PD slice (fixed) against the slice moved by TRUTH: the label test registers the
+    map's object against the slice (an outline-only pair, right to a third of a pixel here) and measures how far the
+    result lies from that answer, so a result 8 px or 10 degrees off measures that distance (an angle: its arc at the
+    RMS radius) and flags; at the truth it passes. Off at 0, and never asked of an image that is not a label map. The
+    test only flags: the registration's own answer is the same with it off."""
+    obj = object_mask(pd_slice)
+    classes = 1.0 + (pd_slice.data > np.quantile(pd_slice.data[obj], 1 / 3)) + (pd_slice.data > np.quantile(
+        pd_slice.data[obj], 2 / 3))
+    labels = pd_slice.with_data(np.where(obj, classes, 0.0))
+    image = moved(pd_slice, RigidTransform(tuple(TRUTH), tuple(pd_slice.center)))
+    run = make_run(labels, image)
+    for off, flagged in ((np.zeros(3), []), (np.r_[0.0, 8.0, 0.0], ["label"]), (np.r_[math.radians(10), 0, 0], ["label"])):
+        run.measures = {}
+        assert ask(reg.check_label, run, TRUTH + off) == flagged
+        assert run.measures["label"] == pytest.approx(run.distance(TRUTH + off, TRUTH), abs=0.35)
+    for other in (make_run(labels, image, label=0.0), make_run(pd_slice, image)):
+        other.measures = {}
+        assert ask(reg.check_label, other, TRUTH + np.r_[0.0, 8.0, 0.0]) == [] and other.measures == {}
+    on, off = reg.register(labels, image), reg.register(labels, image, {"check": {"label": 0.0}})
+    assert on.transform.parameters == off.transform.parameters and "label" in on.measures
 
 
 def test_flatness_finds_the_rotation_a_disc_leaves_undetermined(pd_run):

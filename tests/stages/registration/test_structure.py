@@ -232,6 +232,18 @@ def test_an_ordinary_pair_ignores_the_outline_settings_and_level_smoothing_blurs
 
 
 @pytest.mark.parametrize("d", [2, 3])
+def test_plateau_share_of_a_block_label_is_its_inner_fraction_and_of_noise_zero(d):
+    """A block of n pixels a side at one label on 0 is its own object; a pixel of it equals its next neighbour along
+    every axis unless it lies on the block's last row, column (or slice): ((n - 1) / n)^d of them. With noise: 0."""
+    from topomatch.stages.registration.structure import plateau_share
+
+    n, data = 20, np.zeros((40,) * d)
+    data[(slice(10, 10 + n),) * d] = 7.0
+    assert plateau_share(Image(data)) == pytest.approx(((n - 1) / n) ** d, abs=1e-12)
+    assert plateau_share(Image(data + np.random.default_rng(0).normal(0, 0.01, data.shape))) == 0.0
+
+
+@pytest.mark.parametrize("d", [2, 3])
 def test_distinct_levels_counts_a_label_map_and_stops_above_the_limit(d):
     """A label map of 3 values over a strided subset holds 3; a noisy image counts as ``limit + 1``."""
     from topomatch.stages.registration.structure import distinct_levels
