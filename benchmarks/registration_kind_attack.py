@@ -46,7 +46,7 @@ import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws
 
 SPLIT = "kinds"
 SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000, "kinds-3": 54000, "kinds-4": 57000, "kinds-5": 58000,
-               "kinds-6": 59000}
+               "kinds-6": 59000, "label-kinds": 61000}
 """The splits and their seeds' base (``kinds-2``: the same design, declared after ``kinds`` had run once, before any
 code changed; run once with the same release; ``kinds-3``: the same design, declared with the thirty-third round,
 which ``kinds`` and ``kinds-2`` motivated, run once with its code; ``kinds-4``: declared on the branch of a
@@ -58,8 +58,15 @@ release) and ``kinds-6`` then measures what was decided. The rule, fixed here: t
 ``kinds-5``, run once with its code, its label test catches at least one silent error (a wrong result that every
 other test passes) in some dimension and metric, and in each dimension and metric (JT, MI) the correct results that
 only it flags are at most 1 % of that dimension's cases; the classes without it are read from the same rows (the test
-only adds a flag))."""
+only adds a flag); ``label-kinds``: an attack on the thirty-fourth round's label test itself, declared on 2026-12-06
+(fifth session) after it was merged and before any run, with two label-like kinds no threshold was chosen on
+(:data:`SPLIT_KINDS`), to be run once with ``--cases-scale 2``: how often the test refuses a right result, and what
+it catches, on label maps it was not built for)."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
+SPLIT_KINDS = {"label-kinds": ("posterized", "atlas_bg255")}
+"""Splits with kinds of their own: ``posterized`` (a label-like image whose inner boundaries follow the anatomy, where
+the label test must not fire) and ``atlas_bg255`` (a label map whose background is not its minimum, so that the
+test's object, the pixels above the minimum, is not the brain)."""
 SOURCES = {3: [("mni", 10), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
            2: [("mni-axial", 20), ("mni-coronal", 20), ("mni-sagittal", 20), ("itk", 10)]}
 SEEDS = {("mni", 3): 103, ("mni15", 3): 703, ("kmeans", 3): 203, ("anatomical", 3): 303,
@@ -111,16 +118,33 @@ def kind_contour(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -
     return deg.noise(band.astype(np.float64))
 
 
+def kind_posterized(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """The T1 (bias included, no noise) quantised into 4-8 levels of equal counts over the brain at 1..k, 0 outside
+    (a low-bit export, a k-means map)."""
+    t1, inside = deg.bias(f.maps["t1"]), corpus._foreground(f)
+    k = int(np.random.default_rng([spec.seed, spec.index, 19]).integers(4, 9))
+    edges = np.quantile(t1[inside], np.linspace(0.0, 1.0, k + 1)[1:-1])
+    return np.where(inside, 1.0 + np.searchsorted(edges, t1), 0.0)
+
+
+def kind_atlas_bg255(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """The atlas (:func:`kind_atlas`) with its background at 255, above every label (an 8-bit export whose
+    background is white)."""
+    atlas = kind_atlas(f, spec, deg)
+    return np.where(atlas > 0, atlas, 255.0)
+
+
 def register_split() -> None:
     """Add the split and its kinds to the corpus module (this process only)."""
     if SPLIT in corpus.SPLITS:
         return
     corpus.KIND_MAKERS.update({"atlas": kind_atlas, "regions": kind_regions, "inverted_mask": kind_inverted_mask,
-                               "contour": kind_contour})
-    corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:4]
+                               "contour": kind_contour, "posterized": kind_posterized, "atlas_bg255": kind_atlas_bg255})
+    corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:4] + SPLIT_KINDS["label-kinds"]
     last = max(corpus.SPLIT_ORDER.values())
     for i, (split, base) in enumerate(SPLIT_SEEDS.items()):
-        corpus.SPLITS[split], corpus.KINDS[split], corpus.SPLIT_ORDER[split] = SOURCES, KINDS, last + 100 + i
+        corpus.SPLITS[split], corpus.KINDS[split] = SOURCES, SPLIT_KINDS.get(split, KINDS)
+        corpus.SPLIT_ORDER[split] = last + 100 + i
         corpus.SEEDS.update({(split, source, dim): base + offset for (source, dim), offset in SEEDS.items()})
     plan, needed = corpus.plan_case, corpus.maps_needed
 
@@ -138,7 +162,8 @@ def register_split() -> None:
         return dataclasses.replace(spec, section=section)
 
     def maps_needed(kind: str, f: corpus.Fields) -> set[str]:
-        extra = {"atlas": needed("labels", f), "regions": {"mask"}, "inverted_mask": {"mask"}, "contour": {"mask"}}
+        extra = {"atlas": needed("labels", f), "regions": {"mask"}, "inverted_mask": {"mask"}, "contour": {"mask"},
+                 "posterized": {"mask"}, "atlas_bg255": needed("labels", f)}
         return extra[kind] | {"t1"} if kind in extra else needed(kind, f)
 
     corpus.plan_case, corpus.maps_needed = plan_case, maps_needed
