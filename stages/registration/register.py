@@ -63,7 +63,8 @@ class Registration:
     ``overlap``: fraction of the finest level's fixed samples inside the moving image at the result; ``restarts``:
     runs of the schedule adopted after the first (a capture retry); ``measures``: what each self-check test measured,
     flagged or not (``chance``: the measure over its chance level; ``consistency``: a coarser level's largest relative
-    drop; ``agreement``: the distance to a second measure's optimum; ``content``, ``prominence``, ``flatness``)."""
+    drop; ``agreement``: the distance to a second measure's optimum; ``label``: to the answer of a label map's
+    object; ``content``, ``prominence``, ``flatness``)."""
 
     transform: RigidTransform
     value: float

@@ -354,6 +354,19 @@ def test_3d_chance_of_noise_is_one(t1_run):
     assert ask(reg.check_chance, run, TRUTH3) == ["chance"] and 0.5 < run.measures["chance"] < 2.0
 
 
+def test_3d_label_measures_the_distance_to_a_label_maps_object_answer(t1_run):
+    """As in 2D: a three-class label map of the KmeansTest T1 against the T1 moved by TRUTH3; its object's answer lies
+    within 0.35 mm of the truth, so the test passes the truth and flags a result 8 mm off, measuring that distance."""
+    t1 = t1_run.fixed
+    obj = object_mask(t1)
+    q = np.quantile(t1.data[obj], [1 / 3, 2 / 3])
+    run = make_run(t1.with_data(np.where(obj, 1.0 + (t1.data > q[0]) + (t1.data > q[1]), 0.0)), t1_run.moving)
+    for off, flagged in ((np.zeros(6), []), (np.r_[0.0, 0.0, 0.0, 8.0, 0.0, 0.0], ["label"])):
+        run.measures = {}
+        assert ask(reg.check_label, run, TRUTH3 + off) == flagged
+        assert run.measures["label"] == pytest.approx(run.distance(TRUTH3 + off, TRUTH3), abs=0.35)
+
+
 @pytest.mark.parametrize("d", [0.0, 6.0, 12.0])
 def test_3d_content_is_the_lens_of_two_shifted_balls(d):
     """The volume two balls of radius R share with centres d apart, pi (4R + d)(2R - d)^2 / 12, over a ball's."""
