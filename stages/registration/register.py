@@ -527,9 +527,10 @@ def check_label(run: _Run, theta, value, stop) -> list[Flag]:
     apart = run.measures["label"] = run.distance(np.asarray(outline.transform.parameters), theta)
     if apart <= c.label or not outline.ok:
         return []
-    return [Flag("label", f"the {' and '.join(labels)} image reads as a label map, and its object alone registers "
-                          f"{apart:.2f} units from the result (label {c.label:g}): its inner boundaries may pull the "
-                          f"measure off the outline's pose; check the overlay")]
+    return [Flag("label", f"the {' and '.join(labels)} image reads as a label map, and its object alone (the pixels "
+                          f"above its minimum) registers at {describe(outline.transform)}, {apart:.2f} units from the "
+                          f"result (label {c.label:g}): its inner boundaries may pull the measure off the outline's "
+                          f"pose; check the overlay, or register the object")]
 
 
 def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
