@@ -222,6 +222,10 @@ def test_label_registers_a_label_maps_object_and_flags_a_result_away_from_it(pd_
         run.measures = {}
         assert ask(reg.check_label, run, TRUTH + off) == flagged
         assert run.measures["label"] == pytest.approx(run.distance(TRUTH + off, TRUTH), abs=0.35)
+    run.measures = {}
+    theta = TRUTH + np.r_[0.0, 8.0, 0.0]
+    [flag] = reg.check_label(run, theta, run.levels[-1].objective(theta), "")
+    assert "the fixed image reads as a label map" in flag.message and "registers at (angle +" in flag.message
     for other in (make_run(labels, image, label=0.0), make_run(pd_slice, image)):
         other.measures = {}
         assert ask(reg.check_label, other, TRUTH + np.r_[0.0, 8.0, 0.0]) == [] and other.measures == {}
