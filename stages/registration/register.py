@@ -514,8 +514,8 @@ def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
 def check_label(run: _Run, theta, value, stop) -> list[Flag]:
     """A label map whose inner boundaries mislead the measure (the kind attack's parcellations): with each image read
     as a label map (:func:`~.structure.plateau_share` at least ``check.label_plateau``, three values or more)
-    replaced by its object, the pair registered again ends more than ``check.label`` from the result and passes its own
-    self-check (the outline's own answer, right where the parcels fooled the measure: docs/registration.md)."""
+    replaced by its object, the pair registered again (default sampling) ends more than ``check.label`` from the result
+    and passes its own self-check (the outline's own answer, right where the parcels fooled the measure)."""
     c, pair = run.params.check, {"fixed": run.fixed, "moving": run.moving}
     if c.label <= 0 or run.outline_only:
         return []

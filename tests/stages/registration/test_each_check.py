@@ -9,6 +9,7 @@ overlap with a shifted copy is the lens area), pure noise (chance), a pair whose
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -206,17 +207,21 @@ def test_content_of_an_outline_drawing_is_its_inside(d):
     assert flagged == ([] if lens_fraction(d, 30.0) >= 0.2 else ["content"])
 
 
+def label_pair(image: Image) -> tuple[Image, Image]:
+    """(a three-class label map of ``image``'s object, 0 outside; ``image`` moved by TRUTH)."""
+    obj = object_mask(image)
+    q = np.quantile(image.data[obj], [1 / 3, 2 / 3])
+    labels = image.with_data(np.where(obj, 1.0 + (image.data > q[0]) + (image.data > q[1]), 0.0))
+    return labels, moved(image, RigidTransform(tuple(TRUTH), tuple(image.center)))
+
+
 def test_label_registers_a_label_maps_object_and_flags_a_result_away_from_it(pd_slice):
     """A three-class label map of the PD slice (fixed) against the slice moved by TRUTH: the label test registers the
     map's object against the slice (an outline-only pair, right to a third of a pixel here) and measures how far the
     result lies from that answer, so a result 8 px or 10 degrees off measures that distance (an angle: its arc at the
     RMS radius) and flags; at the truth it passes. Off at 0, and never asked of an image that is not a label map. The
     test only flags: the registration's own answer is the same with it off."""
-    obj = object_mask(pd_slice)
-    classes = 1.0 + (pd_slice.data > np.quantile(pd_slice.data[obj], 1 / 3)) + (pd_slice.data > np.quantile(
-        pd_slice.data[obj], 2 / 3))
-    labels = pd_slice.with_data(np.where(obj, classes, 0.0))
-    image = moved(pd_slice, RigidTransform(tuple(TRUTH), tuple(pd_slice.center)))
+    labels, image = label_pair(pd_slice)
     run = make_run(labels, image)
     for off, flagged in ((np.zeros(3), []), (np.r_[0.0, 8.0, 0.0], ["label"]), (np.r_[math.radians(10), 0, 0], ["label"])):
         run.measures = {}
@@ -231,6 +236,31 @@ def test_label_registers_a_label_maps_object_and_flags_a_result_away_from_it(pd_
         assert ask(reg.check_label, other, TRUTH + np.r_[0.0, 8.0, 0.0]) == [] and other.measures == {}
     on, off = reg.register(labels, image), reg.register(labels, image, {"check": {"label": 0.0}})
     assert on.transform.parameters == off.transform.parameters and "label" in on.measures
+
+
+def test_label_trusts_an_answer_that_passes_reads_three_values_and_takes_the_pixels_above_the_minimum(pd_slice,
+                                                                                                       monkeypatch):
+    """The label test flags only when its object's answer passes that registration's own self-check (a flagged answer
+    is measured, not trusted); it is not asked of an outline-only pair; a two-valued image (a thresholded one) is no
+    label map; and the object is the pixels above the map's minimum, whatever that minimum is (the map + 10 gives
+    the same answer)."""
+    labels, image = label_pair(pd_slice)
+    off = TRUTH + np.r_[0.0, 8.0, 0.0]
+    real = reg.register
+    monkeypatch.setattr(reg, "register", lambda *a, **k: dataclasses.replace(real(*a, **k), flags=(reg.Flag("x", "x"),)))
+    run = make_run(labels, image)
+    run.measures = {}
+    assert ask(reg.check_label, run, off) == [] and run.measures["label"] == pytest.approx(8.0, abs=0.35)
+    monkeypatch.undo()
+    run.measures, run.outline_only = {}, True
+    assert ask(reg.check_label, run, off) == [] and "label" not in run.measures
+    binary = make_run(labels.with_data((labels.data >= 2).astype(np.float64)), image)
+    binary.measures, binary.outline_only = {}, False
+    assert ask(reg.check_label, binary, off) == [] and "label" not in binary.measures
+    shifted = make_run(labels.with_data(labels.data + 10.0), image)
+    shifted.measures = {}
+    assert ask(reg.check_label, shifted, off) == ["label"]
+    assert shifted.measures["label"] == pytest.approx(8.0, abs=0.35)
 
 
 def test_flatness_finds_the_rotation_a_disc_leaves_undetermined(pd_run):
