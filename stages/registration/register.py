@@ -530,7 +530,7 @@ def check_label(run: _Run, theta, value, stop) -> list[Flag]:
     return [Flag("label", f"the {' and '.join(labels)} image reads as a label map, and its object alone (the pixels "
                           f"above its minimum) registers at {describe(outline.transform)}, {apart:.2f} units from the "
                           f"result (label {c.label:g}): its inner boundaries may pull the measure off the outline's "
-                          f"pose; check the overlay, or register the object")]
+                          f"pose; check the overlay, or register the object (--set check.label=0 turns this test off)")]
 
 
 def check_stability(run: _Run, theta, value, stop) -> list[Flag]:
