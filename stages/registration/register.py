@@ -521,9 +521,10 @@ def check_label(run: _Run, theta, value, stop) -> list[Flag]:
         return []
     if not (labels := [r for r, im in pair.items() if plateau_share(im) >= c.label_plateau and distinct_levels(im, 2) > 2]):
         return []
-    for r in labels:
-        pair[r] = pair[r].with_data((pair[r].data > pair[r].data.min()).astype(np.float64))
-    outline = register(pair["fixed"], pair["moving"], run.params)  # an answer its own self-check does not trust: none
+    if getattr(run, "label_answer", None) is None:  # once a run: it does not depend on the result (a retry asks again)
+        pair.update({r: pair[r].with_data((pair[r].data > pair[r].data.min()).astype(np.float64)) for r in labels})
+        run.label_answer = register(pair["fixed"], pair["moving"], run.params)
+    outline = run.label_answer  # an answer its own self-check does not trust: no flag
     apart = run.measures["label"] = run.distance(np.asarray(outline.transform.parameters), theta)
     if apart <= c.label or not outline.ok:
         return []
