@@ -46,7 +46,7 @@ import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws
 
 SPLIT = "kinds"
 SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000, "kinds-3": 54000, "kinds-4": 57000, "kinds-5": 58000,
-               "kinds-6": 59000, "label-kinds": 61000}
+               "kinds-6": 59000, "label-kinds": 61000, "kinds-7": 62000}
 """The splits and their seeds' base (``kinds-2``: the same design, declared after ``kinds`` had run once, before any
 code changed; run once with the same release; ``kinds-3``: the same design, declared with the thirty-third round,
 which ``kinds`` and ``kinds-2`` motivated, run once with its code; ``kinds-4``: declared on the branch of a
@@ -61,7 +61,13 @@ only it flags are at most 1 % of that dimension's cases; the classes without it 
 only adds a flag); ``label-kinds``: an attack on the thirty-fourth round's label test itself, declared on 2026-12-06
 (fifth session) after it was merged and before any run, with two label-like kinds no threshold was chosen on
 (:data:`SPLIT_KINDS`), to be run once with ``--cases-scale 2``: how often the test refuses a right result, and what
-it catches, on label maps it was not built for)."""
+it catches, on label maps it was not built for); ``kinds-7``: the design of ``kinds-5``, declared on 2026-12-06 (sixth
+session) before any run, to be run with ``--kinds atlas,regions --cases-scale 5`` in both dimensions with JT and MI,
+once with the release and once with the thirty-fifth round (a label map of three labels or more is not
+smoothed at the finest level), and so decide that round. The rule, fixed here: it is merged if, on ``kinds-7``,
+(i) in no dimension and metric do the silent errors rise, (ii) over both dimensions and metrics the correct results
+(flagged or not) do not fall, and (iii) in no dimension and metric do the false flags rise by more than 1 % of that
+dimension's cases. ``final37`` (``registration_corpus.py``) then measures what was decided)."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
 SPLIT_KINDS = {"label-kinds": ("posterized", "atlas_bg255")}
 """Splits with kinds of their own: ``posterized`` (a label-like image whose inner boundaries follow the anatomy, where
