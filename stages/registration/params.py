@@ -48,7 +48,7 @@ class MetricSpec(_Named):
                                  description="a pair in which either image holds at most this many distinct "
                                              "intensities (a label map, a thresholded mask) is measured as an "
                                              "outline-only pair is, at outline_alpha with the finest level smoothed "
-                                             "by outline_smoothing, but not flagged as one (0: off)")
+                                             "(outline_smoothing, label_smoothing), but not flagged as one (0: off)")
 
     def label(self) -> str:
         """``jt(alpha=2 histogram)``, ``tmi(alpha=2)``, ``mi``."""
@@ -256,10 +256,12 @@ class RegisterParams(Params):
                                                                    "on_failure")
     seed: int = Field(0, ge=0, description="seed of the SPSA perturbations and of the sample subsets")
     outline_smoothing: float = Field(1.0, ge=0, allow_inf_nan=False,
-                                     description="on an outline-only pair (metric.outline_alpha), the finest level's "
+                                     description="on an outline-only or two-level pair, the finest level's "
                                                  "images are smoothed by a Gaussian of this many of its pixels: the "
                                                  "outline's step becomes a ramp that the histogram sees at sub-pixel "
                                                  "shifts (0: the level's own smoothing)")
+    label_smoothing: float = Field(1.0, ge=0, allow_inf_nan=False, description="the same on a label map of three "
+                                   "labels or more, whose blends fall on other labels' values (3D: 0, 36th round)")
     coarse_overlap_power: float = Field(0.0, ge=0, le=4, allow_inf_nan=False,
                                         description="every level but the finest multiplies its measure by the "
                                                     "overlap fraction to this power: a sliver of overlap cannot "
@@ -289,7 +291,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
                      _level(2.0, 64, 40, 0.3, 1.0, "parzen", 30000, average=2, gain_alpha=1.0, settle=0.2, reruns=2)],
         "start": {"steps": 2, "iterations": 40}, "optimizer": {"average_finest": 1},
         "bounds": {"max_angle": 45.0},
-        "coarse_overlap_power": 1.0,
+        "coarse_overlap_power": 1.0, "label_smoothing": 0.0,  # thirty-sixth round
         "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
                   "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
                   "outline_view_partner": False, "outline_prominence": False},

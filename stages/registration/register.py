@@ -204,9 +204,8 @@ class _Run:
         return count if count <= limit else None
 
     def _pyramid(self) -> list[_Level]:
-        """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images
-        smoothed by its ``smoothing`` in its own pixels (the finest by ``outline_smoothing`` on an outline-only or
-        discrete pair)."""
+        """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images smoothed
+        by its ``smoothing`` in its pixels (a discrete pair's finest by ``outline_smoothing`` or ``label_smoothing``)."""
         p, m = self.params, self.metric
         mask_image = None if self.mask is None else self.fixed.with_data(self.mask.astype(np.float64))
         last = len(p.schedule) - 1
@@ -214,7 +213,8 @@ class _Run:
         def build(i: int, spec: LevelSpec, grid: LevelSpec, sigma: float) -> _Level:
             F, M = (self.fixed.smoothed(sigma), self.moving.smoothed(sigma)) if sigma > 0 else (self.fixed, self.moving)
             F, M = F.shrink_to(grid.spacing, MIN_LEVEL_VOXELS), M.shrink_to(grid.spacing, MIN_LEVEL_VOXELS)
-            blur = p.outline_smoothing if i == last and self.outline_measure and p.outline_smoothing > 0 else spec.smoothing
+            smooth = p.outline_smoothing if self.outline_only or self.levels_count in (1, 2) else p.label_smoothing
+            blur = smooth if i == last and self.outline_measure and smooth > 0 else spec.smoothing
             if blur > 0:
                 F, M = (X.with_data(gaussian_blur(X.data, [blur] * X.dim)) for X in (F, M))
             mask = None if mask_image is None else mask_image.shrink_to(grid.spacing, MIN_LEVEL_VOXELS).data >= 0.5

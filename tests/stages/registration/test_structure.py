@@ -278,6 +278,35 @@ def test_a_thresholded_image_with_structure_inside_is_measured_at_order_one_but_
 
 
 @pytest.mark.parametrize("d", [2, 3])
+def test_the_finest_level_of_a_label_map_is_smoothed_by_label_smoothing_and_of_a_mask_by_outline_smoothing(d, pd_slice):
+    """Thirty-sixth round: a discrete pair's finest level is smoothed by ``outline_smoothing`` (1 pixel) when its
+    discrete image has two levels (a thresholded mask: the step becomes a ramp) and by ``label_smoothing`` when it has
+    three labels or more (default 1 pixel in 2D, 0 in 3D: a blend of two labels falls on a third's value); set
+    explicitly, ``label_smoothing`` is used in either dimension. Both measured at ``outline_alpha``. 2D: the PD slice;
+    3D: KmeansTest at 4 x 4 x 3 mm; each against a three-class label map and a binary mask of itself."""
+    from tests_paths import ITK_DIR
+    from topomatch.stages.registration.io import read_image
+    from topomatch.stages.registration.params import RegisterParams, for_dimension
+    from topomatch.stages.registration.register import MIN_LEVEL_VOXELS, _Run
+
+    fixed = pd_slice if d == 2 else read_image(ITK_DIR / "KmeansTest_T1UCharRaw.nii.gz").shrink((2, 2, 1))
+    inside = fixed.data > 0.2 * fixed.data.max()
+    q = np.quantile(fixed.data[inside], [1 / 3, 2 / 3])
+    labels = np.where(inside, 1.0 + (fixed.data > q[0]) + (fixed.data > q[1]), 0.0)
+    default = 1.0 if d == 2 else 0.0
+    for moving, given, sigma in ((labels, {}, default), ((labels == 3).astype(float), {}, 1.0),
+                                 (labels, {"label_smoothing": 0.5}, 0.5), (labels, {"label_smoothing": 0}, 0.0)):
+        params = for_dimension(RegisterParams.model_validate(given), d)
+        run = _Run(fixed, fixed.with_data(moving), params, None, None)
+        assert not run.outline_only and run.levels_count == len(np.unique(moving))
+        assert run.metric.alpha == params.metric.outline_alpha and params.outline_smoothing == 1.0
+        for got, image in zip(run.levels[-1].images[:2], (fixed, fixed.with_data(moving))):
+            small = image.shrink_to(params.schedule[-1].spacing, MIN_LEVEL_VOXELS)
+            expected = gaussian_blur(small.data, [sigma] * d) if sigma else small.data
+            np.testing.assert_allclose(got.data, expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("d", [2, 3])
 def test_two_class_residual_of_a_grid_filling_two_level_image_is_its_noise(d):
     """An object that fills the grid (the dark part a corner, 44 %, or a one-pixel slab at a face: no outline to judge,
     both other measures NaN): at two levels 0 / 1 the measure is 0; with Gaussian noise of deviation s it is s^2
