@@ -262,6 +262,8 @@ class RegisterParams(Params):
                                                  "shifts (0: the level's own smoothing)")
     label_smoothing: float = Field(1.0, ge=0, allow_inf_nan=False, description="the same on a label map of three "
                                    "labels or more, whose blends fall on other labels' values (3D: 0, 36th round)")
+    label_samples: float = Field(1.0, gt=0, le=16, allow_inf_nan=False, description="a label map's finest level takes "
+                                 "this many times its samples: unsmoothed, its measure is rough (3D: 4, 37th round)")
     coarse_overlap_power: float = Field(0.0, ge=0, le=4, allow_inf_nan=False,
                                         description="every level but the finest multiplies its measure by the "
                                                     "overlap fraction to this power: a sliver of overlap cannot "
@@ -291,7 +293,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
                      _level(2.0, 64, 40, 0.3, 1.0, "parzen", 30000, average=2, gain_alpha=1.0, settle=0.2, reruns=2)],
         "start": {"steps": 2, "iterations": 40}, "optimizer": {"average_finest": 1},
         "bounds": {"max_angle": 45.0},
-        "coarse_overlap_power": 1.0, "label_smoothing": 0.0,  # thirty-sixth round
+        "coarse_overlap_power": 1.0, "label_smoothing": 0.0, "label_samples": 4.0,  # 36th, 37th rounds
         "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
                   "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
                   "outline_view_partner": False, "outline_prominence": False},

@@ -25,24 +25,21 @@ from topomatch.stages.registration.params import DIMENSION_DEFAULTS, LevelSpec, 
 from topomatch.stages.optimize.powell import PowellSettings, powell_maximize
 from topomatch.stages.registration.search import GridSearch, SearchImages, flatness, grid_search, search_spacing
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
-from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure,
-                                                     once_per_image, outline_gap, outline_in_view, plateau_share,
-                                                     two_class_residual)
+from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure, once_per_image,
+                                                     outline_gap, outline_in_view, plateau_share, two_class_residual)
 from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
 """Fewest pixels along any axis of a pyramid level; a coarser level shrinks that axis less."""
 MIN_LEVEL_SAMPLES = 2000
-"""Fewest fixed samples of a level's measure; a coarser level with fewer is measured on the grid of the first
-finer level with enough, smoothed (its schedule entry is kept)."""
+"""Fewest fixed samples of a level's measure; a coarser level with fewer is measured, smoothed, on the grid of the first finer one with enough."""
 SMALL_FIELD, LARGE_FIELD = 64.0, 512.0
 """Physical units: the defaults' lengths (levels, steps, start grid, margin, the self-check's distances) were chosen on
 fields of view of 82-388; a fixed grid whose largest extent E is below the first (twenty-fifth round) or above the
 second (twenty-seventh) is registered in working units of E over it (``measures['unit']``), the result scaled back."""
 DROP_SAMPLES = 8  # the outline test's drop must be positive on average over this many other samples (29th round)
 SMALL_FOV_SIGMA = 0.3
-"""Gaussian sigma, as a fraction of the level's spacing, that stands in for its block average on a finer grid (a
-block of width s has a standard deviation of s / sqrt(12) = 0.29 s)."""
+"""Gaussian sigma (of the level's spacing) standing in for its block average on a finer grid (s / sqrt(12) = 0.29 s)."""
 
 
 @dataclass(frozen=True)
@@ -128,8 +125,7 @@ def sample_mask(fixed: Image, params: RegisterParams) -> np.ndarray | None:
 
 
 OUTLINE_TESTS = {
-    "structure": (interior_structure, "has almost no structure inside its outline (interior gradient {:.3f} of the "
-                                      "outline's"),
+    "structure": (interior_structure, "has almost no structure inside its outline (interior gradient {:.3f} of the outline's"),
     "spread": (interior_spread, "is almost uniform inside its object (intensity spread {:.3f} of its contrast"),
     "residual": (two_class_residual, "fills the grid with two intensity levels only, or two exact plateaus and a "
                                      "ramp (its Otsu classes vary by {:.4f} of their contrast squared, 0 for plateaus"),
@@ -159,8 +155,7 @@ class _Run:
         self.params, self.callback = params, callback
         self.fixed, self.moving, self.dim = fixed, moving, fixed.dim
         self.k = n_angles(fixed.dim)
-        self.center = fixed.center
-        self.mask = mask
+        self.center, self.mask = fixed.center, mask
         self.structures = self._structures()
         self.outline_only = bool(_below_outline_thresholds(self))
         self.levels_count = self._levels_count()
@@ -204,8 +199,8 @@ class _Run:
         return count if count <= limit else None
 
     def _pyramid(self) -> list[_Level]:
-        """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images smoothed
-        by its ``smoothing`` in its pixels (a discrete pair's finest by ``outline_smoothing`` or ``label_smoothing``)."""
+        """One measure per schedule level, coarse to fine (module docstring, point 2); each level's images smoothed by its
+        ``smoothing`` in its pixels (a discrete pair's finest: ``outline_smoothing``, ``label_smoothing``, ``label_samples``)."""
         p, m = self.params, self.metric
         mask_image = None if self.mask is None else self.fixed.with_data(self.mask.astype(np.float64))
         last = len(p.schedule) - 1
@@ -213,8 +208,11 @@ class _Run:
         def build(i: int, spec: LevelSpec, grid: LevelSpec, sigma: float) -> _Level:
             F, M = (self.fixed.smoothed(sigma), self.moving.smoothed(sigma)) if sigma > 0 else (self.fixed, self.moving)
             F, M = F.shrink_to(grid.spacing, MIN_LEVEL_VOXELS), M.shrink_to(grid.spacing, MIN_LEVEL_VOXELS)
-            smooth = p.outline_smoothing if self.outline_only or self.levels_count in (1, 2) else p.label_smoothing
+            labels = not (self.outline_only or self.levels_count in (1, 2))  # a label map of three labels or more
+            smooth = p.label_smoothing if labels else p.outline_smoothing
             blur = smooth if i == last and self.outline_measure and smooth > 0 else spec.smoothing
+            if i == last and self.outline_measure and labels and spec.samples and p.label_samples != 1:
+                spec = grid = spec.model_copy(update={"samples": round(p.label_samples * spec.samples)})
             if blur > 0:
                 F, M = (X.with_data(gaussian_blur(X.data, [blur] * X.dim)) for X in (F, M))
             mask = None if mask_image is None else mask_image.shrink_to(grid.spacing, MIN_LEVEL_VOXELS).data >= 0.5

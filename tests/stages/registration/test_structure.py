@@ -282,7 +282,8 @@ def test_the_finest_level_of_a_label_map_is_smoothed_by_label_smoothing_and_of_a
     """Thirty-sixth round: a discrete pair's finest level is smoothed by ``outline_smoothing`` (1 pixel) when its
     discrete image has two levels (a thresholded mask: the step becomes a ramp) and by ``label_smoothing`` when it has
     three labels or more (default 1 pixel in 2D, 0 in 3D: a blend of two labels falls on a third's value); set
-    explicitly, ``label_smoothing`` is used in either dimension. Both measured at ``outline_alpha``. 2D: the PD slice;
+    explicitly, ``label_smoothing`` is used in either dimension. Thirty-seventh round: a label map's finest level takes
+    ``label_samples`` times its samples (2D 1, 3D 4), a mask's its own. Both measured at ``outline_alpha``. 2D: the PD slice;
     3D: KmeansTest at 4 x 4 x 3 mm; each against a three-class label map and a binary mask of itself."""
     from tests_paths import ITK_DIR
     from topomatch.stages.registration.io import read_image
@@ -293,13 +294,16 @@ def test_the_finest_level_of_a_label_map_is_smoothed_by_label_smoothing_and_of_a
     inside = fixed.data > 0.2 * fixed.data.max()
     q = np.quantile(fixed.data[inside], [1 / 3, 2 / 3])
     labels = np.where(inside, 1.0 + (fixed.data > q[0]) + (fixed.data > q[1]), 0.0)
-    default = 1.0 if d == 2 else 0.0
-    for moving, given, sigma in ((labels, {}, default), ((labels == 3).astype(float), {}, 1.0),
-                                 (labels, {"label_smoothing": 0.5}, 0.5), (labels, {"label_smoothing": 0}, 0.0)):
+    default, times = (1.0, 1) if d == 2 else (0.0, 4)
+    for moving, given, sigma, factor in ((labels, {}, default, times), ((labels == 3).astype(float), {}, 1.0, 1),
+                                         (labels, {"label_smoothing": 0.5, "label_samples": 2}, 0.5, 2),
+                                         (labels, {"label_smoothing": 0}, 0.0, times)):
         params = for_dimension(RegisterParams.model_validate(given), d)
         run = _Run(fixed, fixed.with_data(moving), params, None, None)
         assert not run.outline_only and run.levels_count == len(np.unique(moving))
         assert run.metric.alpha == params.metric.outline_alpha and params.outline_smoothing == 1.0
+        assert run.levels[-1].spec.samples == factor * params.schedule[-1].samples
+        assert [lv.spec for lv in run.levels[:-1]] == params.schedule[:-1]  # the coarser levels as scheduled
         for got, image in zip(run.levels[-1].images[:2], (fixed, fixed.with_data(moving))):
             small = image.shrink_to(params.schedule[-1].spacing, MIN_LEVEL_VOXELS)
             expected = gaussian_blur(small.data, [sigma] * d) if sigma else small.data
