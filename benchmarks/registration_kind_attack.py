@@ -47,7 +47,7 @@ import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws
 SPLIT = "kinds"
 SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000, "kinds-3": 54000, "kinds-4": 57000, "kinds-5": 58000,
                "kinds-6": 59000, "label-kinds": 61000, "kinds-7": 62000,
-               "kinds-8": 64000, "kinds-9": 66000}
+               "kinds-8": 64000, "kinds-9": 66000, "kinds-10": 68000}
 """The splits and their seeds' base (``kinds-2``: the same design, declared after ``kinds`` had run once, before any
 code changed; run once with the same release; ``kinds-3``: the same design, declared with the thirty-third round,
 which ``kinds`` and ``kinds-2`` motivated, run once with its code; ``kinds-4``: declared on the branch of a
@@ -83,7 +83,11 @@ run with ``--kinds atlas,regions --cases-scale 10 --dims 3`` (112 cases, so that
 and MI, once with the release and once with the thirty-seventh round (the thirty-sixth plus ``label_samples`` 4 in 3D:
 a label map's unsmoothed finest level on four times the samples), decided by the same rule: merged if (i) with neither
 metric do the silent errors rise, (ii) over both metrics the correct results do not fall, and (iii) with neither
-metric do the false flags rise by more than 1 % of the cases. ``final39`` then measures what was decided)."""
+metric do the false flags rise by more than 1 % of the cases. ``final39`` then measures what was decided. Outcome:
+every condition held, the round was merged; ``kinds-10``: the same design as ``kinds-9``, declared on 2026-12-06 (sixth
+session) after the merge and before any run, to be run once with the merged release (``--kinds atlas,regions
+--cases-scale 10 --dims 3``, JT, MI and elastix): a fresh measure of the thirty-seventh round on 3D label maps, nothing
+to decide)."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
 SPLIT_KINDS = {"label-kinds": ("posterized", "atlas_bg255")}
 """Splits with kinds of their own: ``posterized`` (a label-like image whose inner boundaries follow the anatomy, where
