@@ -87,7 +87,7 @@ metric do the false flags rise by more than 1 % of the cases. ``final39`` then m
 every condition held, the round was merged; ``kinds-10``: the same design as ``kinds-9``, declared on 2026-12-06 (sixth
 session) after the merge and before any run, to be run once with the merged release (``--kinds atlas,regions
 --cases-scale 10 --dims 3``, JT, MI and elastix): a fresh measure of the thirty-seventh round on 3D label maps, nothing
-to decide)."""
+to decide; run once: JT 77/9/25/1, MI 89/5/18/0, elastix 88/24)."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
 SPLIT_KINDS = {"label-kinds": ("posterized", "atlas_bg255")}
 """Splits with kinds of their own: ``posterized`` (a label-like image whose inner boundaries follow the anatomy, where
