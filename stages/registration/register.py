@@ -204,14 +204,14 @@ class _Run:
         p, m = self.params, self.metric
         mask_image = None if self.mask is None else self.fixed.with_data(self.mask.astype(np.float64))
         last = len(p.schedule) - 1
+        labels = not (self.outline_only or self.levels_count in (1, 2))  # a label map of three labels or more
+        finest_blur = p.label_smoothing if labels else p.outline_smoothing
 
         def build(i: int, spec: LevelSpec, grid: LevelSpec, sigma: float) -> _Level:
             F, M = (self.fixed.smoothed(sigma), self.moving.smoothed(sigma)) if sigma > 0 else (self.fixed, self.moving)
             F, M = F.shrink_to(grid.spacing, MIN_LEVEL_VOXELS), M.shrink_to(grid.spacing, MIN_LEVEL_VOXELS)
-            labels = not (self.outline_only or self.levels_count in (1, 2))  # a label map of three labels or more
-            smooth = p.label_smoothing if labels else p.outline_smoothing
-            blur = smooth if i == last and self.outline_measure and smooth > 0 else spec.smoothing
-            if i == last and self.outline_measure and labels and spec.samples and p.label_samples != 1:
+            blur = finest_blur if i == last and self.outline_measure and finest_blur > 0 else spec.smoothing
+            if i == last and self.outline_measure and labels and spec.samples:
                 spec = grid = spec.model_copy(update={"samples": round(p.label_samples * spec.samples)})
             if blur > 0:
                 F, M = (X.with_data(gaussian_blur(X.data, [blur] * X.dim)) for X in (F, M))
