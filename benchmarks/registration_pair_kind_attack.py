@@ -1,0 +1,78 @@
+"""An attack with a pairing the corpus never draws: **both images of the same outline-only or discrete kind** (a mask
+against a mask, a label map against a label map, a thresholded image against another), where every corpus and attack
+case so far paired its kind with a T1. Registering two segmentations, two atlases' label maps or two binary masks is
+what users do when the grey values are gone (a segmentation-to-segmentation check, an atlas to an atlas), and there
+*both* images carry their structure at the outline and inner boundaries only.
+
+Kinds (each built on the fixed grid as on the moving one, from the same source, draws and degradations as the corpus
+makes the moving image; the fixed image without a bias field, as the corpus's fixed images are):
+
+- ``silhouette``: the brain or head mask at one value (dilated by the case's 0-3 voxels on both sides), with noise;
+- ``labels``: the 0-3 tissue label map on both sides (no noise);
+- ``threshold``: the T1 above one percentile of its foreground, binary, on both sides;
+- ``regions``: Voronoi regions of the brain at random label values, the same values on both sides
+  (``registration_kind_attack.kind_regions``);
+- ``t2``: the T2-like image on both sides (the control: an image pair, mono-modal).
+
+Split ``pair-kinds`` (seeds 70xxx, drawn by no other script), the kind attack's sources and sections (a quarter of the
+2D sections in a tight frame), declared on 2026-12-06 (seventh session) before any of its results was seen, to be run
+once with the release at that commit (``--cases-scale 2``, JT, MI and elastix). Correct = mean TRE over the fixed
+content <= 1 pixel (2D) / 1 mm (3D); counts per kind: ok / FF (correct, flagged) / fw (wrong, flagged) / silent
+(wrong, passed).
+
+    TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_pair_kind_attack.py --dims 2 \\
+        --cases-scale 2 --json benchmarks/results/registration_pair_kind_attack_2d.json
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws, methods and scoring)
+import registration_kind_attack as kind_attack  # noqa: E402  (its kinds, sources and section frames)
+
+SPLIT = "pair-kinds"
+SEED_BASE = 70000
+KINDS = ("silhouette", "labels", "threshold", "regions", "t2")
+NOISELESS = ("labels", "regions")
+"""Kinds made without noise on either side (label maps), as the corpus makes its moving label maps."""
+
+
+def build_pair(spec: corpus.CaseSpec, build=corpus.build_case) -> corpus.Case:
+    """The corpus's case with its fixed T1 replaced by the same kind as the moving image, made on the fixed grid."""
+    case = build(spec)
+    if spec.split != SPLIT:
+        return case
+    src = corpus.source_fields(spec)
+    noise = 0.0 if spec.kind in NOISELESS else spec.noise_fixed
+    data = corpus.KIND_MAKERS[spec.kind](src, spec, corpus.Degrade(src.grid, noise, np.random.default_rng(
+        [spec.seed, spec.index, 23])))
+    fixed = src.grid.with_data(data, name=f"{spec.id}_fixed", source=src.grid.source)
+    return corpus.Case(spec, fixed, case.moving, case.truth)
+
+
+def register_split() -> None:
+    """Add the split (the kind attack's sources and frames, these kinds) to the corpus module (this process only)."""
+    kind_attack.register_split()
+    if SPLIT in corpus.SPLITS:
+        return
+    corpus.SPLITS[SPLIT], corpus.KINDS[SPLIT] = kind_attack.SOURCES, KINDS
+    corpus.SPLIT_ORDER[SPLIT] = max(corpus.SPLIT_ORDER.values()) + 1
+    corpus.SEEDS.update({(SPLIT, source, dim): SEED_BASE + offset for (source, dim), offset in kind_attack.SEEDS.items()})
+    kind_attack.SPLIT_SEEDS[SPLIT] = SEED_BASE  # its section frames (a quarter tight), no thick slices
+    build, plan = corpus.build_case, corpus.plan_case
+
+    def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
+        spec = plan(split, source, dim, index, place)
+        return dataclasses.replace(spec, swapped=False) if split == SPLIT else spec  # one kind on both sides
+
+    corpus.build_case, corpus.plan_case = (lambda spec: build_pair(spec, build)), plan_case
+
+
+if __name__ == "__main__":  # the corpus's command line (registration_corpus.py --help) on this split
+    corpus.attack_main(SPLIT, sys.argv[1:], register_split)
