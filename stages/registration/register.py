@@ -687,8 +687,8 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
-    """The capture flag if the best of ``probes``, refined at the first level, beats the result there by
-    ``check.margin`` and, run through the schedule, ends higher at full resolution (``adopt``: in ``run.better``)."""
+    """The capture flag if the best of ``probes``, refined at the first level (kept as it is where higher: 38th round),
+    beats the result there by ``check.margin`` and, run through the schedule, ends higher (``adopt``: ``run.better``)."""
     c, levels = run.params.check, run.levels
     coarse, fine = levels[0].objective, levels[-1].objective
     here = coarse(theta)
@@ -696,7 +696,7 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
     for probe in probes:
         v = coarse(probe)
         if c.refine > 0 and math.isfinite(v):
-            probe, v = run.refine(probe)
+            probe, v = max([run.refine(probe), (probe, v)], key=lambda pv: pv[1])
             if run.distance(probe, theta) < 2.0 * levels[0].spacing:
                 continue  # back in the result's basin
         if v > best_value:

@@ -332,6 +332,20 @@ def test_capture_finds_the_truth_from_a_wrong_basin_and_offers_it(pd_run):
     assert ask(reg.check_capture, pd_run, TRUTH) == [] and pd_run.better is None
 
 
+def test_capture_keeps_a_probe_whose_first_level_refine_ends_lower(pd_run, monkeypatch):
+    """A probe at the truth scores above a wrong result at the first level, and its refine climbs away from it, down
+    into the result's basin (a first level whose steps overshoot a narrow peak: a pair of label maps, thirty-eighth
+    round): the probe is kept, so the better basin is still found and, run through the schedule, ends at the truth."""
+    far = TRUTH + np.r_[math.radians(150.0), 20.0, 10.0]
+    first = pd_run.levels[0].objective
+    assert first(TRUTH) > first(far)
+    monkeypatch.setattr(pd_run, "candidates", lambda theta, n=None: [TRUTH.copy()])
+    monkeypatch.setattr(pd_run, "refine", lambda start, objective=None: (far.copy(), first(far)))
+    assert ask(reg.check_capture, pd_run, far) == ["capture"]
+    assert pd_run.better is not None and pd_run.distance(pd_run.better[0], TRUTH) < 0.5
+    pd_run.better = None
+
+
 # --------------------------------------------------------------------------- the same tests in 3D
 
 TRUTH3 = np.array([0.10, -0.05, 0.08, 4.0, -3.0, 2.0])  # (three angles in radians, tx, ty, tz)
