@@ -14,7 +14,10 @@ makes the moving image; the fixed image without a bias field, as the corpus's fi
   on each grid from that image's own mask: the same number of regions and the same values, but other seed points, so
   the two parcellations agree on the brain's outline only (found after the runs: at the truth 3-70 % of the fixed
   brain's pixels carry the same label in the moving image; as two tools' parcellations of one brain would);
-- ``t2``: the T2-like image on both sides (the control: an image pair, mono-modal).
+- ``t2``: the T2-like image on both sides (the control: an image pair, mono-modal);
+- ``parcellation`` (split ``pair-kinds-3`` only): one Voronoi parcellation of the brain (4-24 regions at random label
+  values, its seeds drawn in the fixed image's space) on both sides: the moving image's label at a point is the label
+  of the fixed point the truth maps there, inside the moved brain mask (the same atlas, moved; no noise).
 
 Split ``pair-kinds`` (seeds 70xxx, drawn by no other script), the kind attack's sources and sections (a quarter of the
 2D sections in a tight frame), declared on 2026-12-06 (seventh session) before any of its results was seen, to be run
@@ -31,6 +34,11 @@ dimension: (i) with neither metric do silent errors rise; (ii) over both metrics
 (iii) with neither metric do false flags rise by more than 1 % of the cases. The round is merged if the rule holds
 in both dimensions; ``final40`` (``registration_corpus.py``) is then run once with whichever code it decides.
 
+Split ``pair-kinds-3`` (seeds 72xxx), declared after ``pair-kinds-2`` had decided the round and after reading its silent
+case showed that ``regions`` pairs two different parcellations: the consistent case, ``parcellation`` only, the same
+sources and frames, ``--cases-scale 2`` (140 2D, 56 3D cases), run once with the release that merged the round (JT,
+MI, elastix). Nothing is decided on it.
+
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_pair_kind_attack.py --dims 2 \\
         --cases-scale 2 --json benchmarks/results/registration_pair_kind_attack_2d.json
 """
@@ -42,20 +50,43 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from scipy import spatial
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws, methods and scoring)
 import registration_kind_attack as kind_attack  # noqa: E402  (its kinds, sources and section frames)
 
 SPLIT = "pair-kinds"
-SPLIT_SEEDS = {"pair-kinds": 70000, "pair-kinds-2": 71000}
+SPLIT_SEEDS = {"pair-kinds": 70000, "pair-kinds-2": 71000, "pair-kinds-3": 72000}
+SPLIT_KINDS = {"pair-kinds-3": ("parcellation",)}
 KINDS = ("silhouette", "labels", "threshold", "regions", "t2")
 NOISELESS = ("labels", "regions")
 """Kinds made without noise on either side (label maps), as the corpus makes its moving label maps."""
 
 
+def parcellation_pair(spec: corpus.CaseSpec, build) -> corpus.Case:
+    """One Voronoi parcellation on both grids: seeds drawn inside the fixed brain mask (fixed physical space), each
+    moving pixel labelled by the seed nearest the fixed point the truth maps there, inside the moved brain (the
+    corpus's moved label map > 0: the same crop, slab and frame)."""
+    case = build(dataclasses.replace(spec, kind="labels"))
+    src = corpus.source_fields(spec)
+    rng = np.random.default_rng([spec.seed, spec.index, 13])
+    inside = np.flatnonzero(corpus._foreground(src))
+    seeds = src.grid.points(inside[rng.choice(len(inside), size=min(int(rng.integers(4, 25)), len(inside)),
+                                              replace=False)])
+    values = 1.0 + np.random.default_rng([spec.seed, spec.index, 17]).permutation(len(seeds))
+    tree = spatial.cKDTree(seeds)
+    fixed_labels = values[tree.query(src.grid.points())[1]].reshape(src.grid.shape)
+    moving_labels = values[tree.query(case.truth.inverse().apply(case.moving.points()))[1]].reshape(case.moving.shape)
+    fixed = src.grid.with_data(np.where(corpus._foreground(src), fixed_labels, 0.0), name=f"{spec.id}_fixed",
+                               source=src.grid.source)
+    return corpus.Case(spec, fixed, case.moving.with_data(np.where(case.moving.data > 0, moving_labels, 0.0)), case.truth)
+
+
 def build_pair(spec: corpus.CaseSpec, build=corpus.build_case) -> corpus.Case:
     """The corpus's case with its fixed T1 replaced by the same kind as the moving image, made on the fixed grid."""
+    if spec.kind == "parcellation":
+        return parcellation_pair(spec, build)
     case = build(spec)
     if spec.split not in SPLIT_SEEDS:
         return case
@@ -73,7 +104,7 @@ def register_split() -> None:
     if SPLIT in corpus.SPLITS:
         return
     for split, base in SPLIT_SEEDS.items():
-        corpus.SPLITS[split], corpus.KINDS[split] = kind_attack.SOURCES, KINDS
+        corpus.SPLITS[split], corpus.KINDS[split] = kind_attack.SOURCES, SPLIT_KINDS.get(split, KINDS)
         corpus.SPLIT_ORDER[split] = max(corpus.SPLIT_ORDER.values()) + 1
         corpus.SEEDS.update({(split, source, dim): base + offset for (source, dim), offset in kind_attack.SEEDS.items()})
         kind_attack.SPLIT_SEEDS[split] = base  # its section frames (a quarter tight), no thick slices
