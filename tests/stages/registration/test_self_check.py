@@ -355,7 +355,10 @@ def test_a_basin_only_the_start_search_finds_flags_and_leaves_the_estimate_as_it
 
 def test_an_optimiser_that_stops_short_of_an_optimum_is_flagged(pd_slice):
     """A schedule of absurd steps (100 units: every step overshoots and is blocked) returns its start, 10 degrees
-    from the truth; one unit from it the finest measure is higher (``ascent`` > ``check.margin``): ``gain`` flags it.
+    from the truth; one unit from it the finest measure is higher (``ascent`` > ``check.margin``): ``gain`` flags it
+    (without ``check.retry``, so that the capture test's better probe is not adopted). With it, that probe (a coarse
+    grid angle near the truth, kept although its refine overshoots too: thirty-eighth round) is adopted, and its
+    result, which the absurd steps cannot polish either, is flagged by ``gain`` as well.
     The defaults' result on the same pair is a local optimum (every unit step lowers the measure)."""
     from topomatch.stages.registration.misalign import moved
     from topomatch.stages.registration.params import RegisterParams
@@ -363,9 +366,12 @@ def test_an_optimiser_that_stops_short_of_an_optimum_is_flagged(pd_slice):
     from topomatch.stages.registration.transform import RigidTransform
 
     moving = moved(pd_slice, RigidTransform.euler2d(3.0, -4.0, 10.0, pd_slice.center))
-    stuck = register(pd_slice, moving, RegisterParams(schedule=[{"step": 100.0}]))
+    stuck = register(pd_slice, moving, RegisterParams(schedule=[{"step": 100.0}], check={"retry": False}))
     assert abs(stuck.transform.angles_deg[0] - 10.0) > 5 and "gain" in [f.check for f in stuck.flags]
     assert stuck.measures["ascent"] > 0.005
+    retried = register(pd_slice, moving, RegisterParams(schedule=[{"step": 100.0}]))
+    assert retried.restarts == 1 and abs(retried.transform.angles_deg[0] - 10.0) < 2.5
+    assert "gain" in [f.check for f in retried.flags] and retried.measures["ascent"] > 0.005
     good = register(pd_slice, moving)
     assert good.ok and good.measures["ascent"] < 0
 
