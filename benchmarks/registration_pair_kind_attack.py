@@ -12,8 +12,9 @@ makes the moving image; the fixed image without a bias field, as the corpus's fi
 - ``threshold``: the T1 above one percentile of its foreground, binary, on both sides;
 - ``regions``: Voronoi regions of the brain at random label values (``registration_kind_attack.kind_regions``), drawn
   on each grid from that image's own mask: the same number of regions and the same values, but other seed points, so
-  the two parcellations agree on the brain's outline only (found after the runs: at the truth 3-70 % of the fixed
-  brain's pixels carry the same label in the moving image; as two tools' parcellations of one brain would);
+  the two parcellations agree on the brain's outline only (found after the runs: on the two pairs measured, 3 % and
+  70 % of the fixed brain's pixels carry the same label in the moving image at the truth; as two tools' parcellations of
+  one brain would);
 - ``t2``: the T2-like image on both sides (the control: an image pair, mono-modal);
 - ``parcellation`` (split ``pair-kinds-3`` only): one Voronoi parcellation of the brain (4-24 regions at random label
   values, its seeds drawn in the fixed image's space) on both sides: the moving image's label at a point is the label
