@@ -102,17 +102,22 @@ CONTOUR_WIDTH = 2
 """Voxels: the width of the contour band (inside the mask's boundary)."""
 
 
-def _regions(f: corpus.Fields, spec: corpus.CaseSpec, low: int, high: int) -> tuple[np.ndarray, int]:
-    """(index of the nearest of R seeds drawn inside the brain mask, 0..R-1, on the grid; R) with R in [low, high]."""
+def region_seeds(f: corpus.Fields, spec: corpus.CaseSpec, low: int, high: int) -> np.ndarray:
+    """R Voronoi seeds (R, d), physical points drawn inside the brain mask, with R in [low, high]."""
     rng = np.random.default_rng([spec.seed, spec.index, 13])
     inside = np.flatnonzero(corpus._foreground(f))
     r = int(rng.integers(low, high + 1))
-    seeds = f.grid.points(inside[rng.choice(len(inside), size=min(r, len(inside)), replace=False)])
+    return f.grid.points(inside[rng.choice(len(inside), size=min(r, len(inside)), replace=False)])
+
+
+def _regions(f: corpus.Fields, spec: corpus.CaseSpec, low: int, high: int) -> tuple[np.ndarray, int]:
+    """(index of the nearest of the :func:`region_seeds`, 0..R-1, on the grid; R)."""
+    seeds = region_seeds(f, spec, low, high)
     _, nearest = spatial.cKDTree(seeds).query(f.grid.points())
     return nearest.reshape(f.grid.shape), len(seeds)
 
 
-def _permuted(labels: np.ndarray, count: int, spec: corpus.CaseSpec) -> np.ndarray:
+def permuted(labels: np.ndarray, count: int, spec: corpus.CaseSpec) -> np.ndarray:
     """``labels`` (0..count-1) mapped to a random permutation of 1..count."""
     values = 1 + np.random.default_rng([spec.seed, spec.index, 17]).permutation(count)
     return values[labels].astype(np.float64)
@@ -122,14 +127,14 @@ def kind_atlas(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> 
     """Tissue class of each Voronoi region, as labels at random values (no noise)."""
     region, r = _regions(f, spec, 6, 20)
     tissue = corpus.kind_labels(f, spec, deg).astype(int)  # 0 outside, 1..3 inside
-    label = _permuted(3 * region + np.maximum(tissue, 1) - 1, 3 * r, spec)
+    label = permuted(3 * region + np.maximum(tissue, 1) - 1, 3 * r, spec)
     return np.where(tissue > 0, label, 0.0)
 
 
 def kind_regions(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
     """Voronoi regions of the brain at random label values, 0 outside (no noise)."""
     region, r = _regions(f, spec, 4, 24)
-    return np.where(corpus._foreground(f), _permuted(region, r, spec), 0.0)
+    return np.where(corpus._foreground(f), permuted(region, r, spec), 0.0)
 
 
 def kind_inverted_mask(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:

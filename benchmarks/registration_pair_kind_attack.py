@@ -66,22 +66,16 @@ NOISELESS = ("labels", "regions")
 
 
 def parcellation_pair(spec: corpus.CaseSpec, build) -> corpus.Case:
-    """One Voronoi parcellation on both grids: seeds drawn inside the fixed brain mask (fixed physical space), each
-    moving pixel labelled by the seed nearest the fixed point the truth maps there, inside the moved brain (the
-    corpus's moved label map > 0: the same crop, slab and frame)."""
+    """One Voronoi parcellation on both grids: the fixed image is ``kind_regions`` of the source (seeds drawn inside
+    the fixed brain mask, fixed physical space), each moving pixel labelled by the seed nearest the fixed point the
+    truth maps there, inside the moved brain (the corpus's moved label map > 0: the same crop, slab and frame)."""
     case = build(dataclasses.replace(spec, kind="labels"))
     src = corpus.source_fields(spec)
-    rng = np.random.default_rng([spec.seed, spec.index, 13])
-    inside = np.flatnonzero(corpus._foreground(src))
-    seeds = src.grid.points(inside[rng.choice(len(inside), size=min(int(rng.integers(4, 25)), len(inside)),
-                                              replace=False)])
-    values = 1.0 + np.random.default_rng([spec.seed, spec.index, 17]).permutation(len(seeds))
-    tree = spatial.cKDTree(seeds)
-    fixed_labels = values[tree.query(src.grid.points())[1]].reshape(src.grid.shape)
-    moving_labels = values[tree.query(case.truth.inverse().apply(case.moving.points()))[1]].reshape(case.moving.shape)
-    fixed = src.grid.with_data(np.where(corpus._foreground(src), fixed_labels, 0.0), name=f"{spec.id}_fixed",
-                               source=src.grid.source)
-    return corpus.Case(spec, fixed, case.moving.with_data(np.where(case.moving.data > 0, moving_labels, 0.0)), case.truth)
+    seeds = kind_attack.region_seeds(src, spec, 4, 24)
+    _, nearest = spatial.cKDTree(seeds).query(case.truth.inverse().apply(case.moving.points()))
+    moving = kind_attack.permuted(nearest, len(seeds), spec).reshape(case.moving.shape)
+    fixed = src.grid.with_data(kind_attack.kind_regions(src, spec, None), name=f"{spec.id}_fixed", source=src.grid.source)
+    return corpus.Case(spec, fixed, case.moving.with_data(np.where(case.moving.data > 0, moving, 0.0)), case.truth)
 
 
 def build_pair(spec: corpus.CaseSpec, build=corpus.build_case) -> corpus.Case:
