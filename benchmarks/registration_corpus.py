@@ -239,6 +239,9 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final40``: declared (2026-12-06, seventh session) with the thirty-eighth round (the capture test keeps a probe whose
   first-level refine ends lower than it began), before any run of it, the design of ``final39``, fresh seeds 69xxx;
   run once with whichever code ``pair-kinds-2`` decides (``registration_pair_kind_attack.py``).
+- ``final41``: declared (2026-12-06, eighth session) with the thirty-ninth round (the coarse search scaled to and
+  sampling the fixed image's sampling region), before any run of it, the design of ``final40``, fresh seeds 75xxx;
+  run once with whichever code ``oblique`` decides (``registration_oblique_attack.py``).
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -322,7 +325,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 41)},  # final7 to final40: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 42)},  # final7 to final41: one design, fresh seeds each
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -344,7 +347,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 41)},  # final8 to final40
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 42)},  # final8 to final41
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -487,6 +490,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final40", "mni", 3): 69103, ("final40", "mni15", 3): 69703, ("final40", "kmeans", 3): 69203,
          ("final40", "anatomical", 3): 69303, ("final40", "mni-axial", 2): 69102, ("final40", "mni-coronal", 2): 69402,
          ("final40", "mni-sagittal", 2): 69502, ("final40", "itk", 2): 69602,
+         ("final41", "mni", 3): 75103, ("final41", "mni15", 3): 75703, ("final41", "kmeans", 3): 75203,
+         ("final41", "anatomical", 3): 75303, ("final41", "mni-axial", 2): 75102, ("final41", "mni-coronal", 2): 75402,
+         ("final41", "mni-sagittal", 2): 75502, ("final41", "itk", 2): 75602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -503,7 +509,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
