@@ -377,7 +377,8 @@ class _Run:
             rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
                                                    for a in c.angles])
             polish = [np.zeros(3)]
-        images = SearchImages(self.fixed, self.moving, center=self.center, min_overlap=self.params.metric.min_overlap)
+        images = SearchImages(self.fixed, self.moving, center=self.center, min_overlap=self.params.metric.min_overlap,
+                              region=self.mask)
         return grid_search(images, rotations, lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
                            steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
 
@@ -637,10 +638,9 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
     content's RMS radius)."""
     if (threshold := run.params.check.min_flatness) <= 0:
         return []
-    fg = np.argwhere(content := foreground_mask(run.fixed))  # a search copy scaled to the fixed content's extent
-    extent = (fg.max(axis=0) - fg.min(axis=0) + 1)[::-1] * np.asarray(run.fixed.spacing)
+    content = foreground_mask(run.fixed)  # a search copy scaled to the fixed content's extent
     images = SearchImages(run.fixed, run.moving, center=run.center, min_overlap=run.params.metric.min_overlap,
-                          spacing=max(search_spacing([run.fixed, run.moving]) / 4, float(extent.min()) / 24))
+                          spacing=max(search_spacing([run.fixed, run.moving]) / 4, search_spacing([run.fixed], content)))
     radius = rms_radius(run.fixed, content)
     ratio, u = flatness(lambda t: images.score(t, min_overlap=0.0), theta, dim=run.dim, reach=6.0 * images.spacing,
                         radius=radius)
