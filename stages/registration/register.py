@@ -427,8 +427,7 @@ def check_overlap(run: _Run, theta, value, stop) -> list[Flag]:
 def check_bounds(run: _Run, theta, value, stop) -> list[Flag]:
     """Clipped iterates pile up on a bound when the optimum lies beyond it: a result within one unit
     (translation, or arc at the RMS radius) of a bound."""
-    tol = run.scales
-    at = (theta <= run.lower + tol) | (theta >= run.upper - tol)
+    at = (theta <= run.lower + run.scales) | (theta >= run.upper - run.scales)
     if not at.any():
         return []
     names = [n for n, b in zip(run.at(theta).names, at) if b]

@@ -97,8 +97,7 @@ class SearchImages:
         U = np.floor(self._inv @ q + 0.5).astype(np.intp)  # (d, n) moving search indices (ties up: shift-exact)
         low = U.min(axis=1) + steps.min(axis=0)
         high = U.max(axis=1) + steps.max(axis=0) - np.asarray(self.moving_small.size) + 1
-        need = max(0, int((-low).max()), int(high.max()))
-        self._canvas(need)
+        self._canvas(max(0, int((-low).max()), int(high.max())))
         base = ((U + self._pad) * self._strides[:, None]).sum(axis=0)
         return base.astype(np.int32)[None, :] + (steps @ self._strides).astype(np.int32)[:, None]
 
