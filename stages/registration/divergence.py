@@ -31,16 +31,14 @@ def _power_sum(p: np.ndarray, alpha: float, axis: int = -1) -> np.ndarray:
     """``sum p^alpha`` along ``axis`` with ``0^alpha = 0``."""
     if alpha == 2.0:
         return np.einsum("...i,...i->...", p, p) if axis in (-1, p.ndim - 1) else (p * p).sum(axis=axis)
-    q = np.where(p > 0, np.power(np.where(p > 0, p, 1.0), alpha), 0.0)
-    return q.sum(axis=axis)
+    return np.where(p > 0, np.power(np.where(p > 0, p, 1.0), alpha), 0.0).sum(axis=axis)
 
 
 def shannon_entropy(p: np.ndarray, axis: int = -1) -> np.ndarray:
     """``-sum p log p`` along ``axis`` (natural log, ``0 log 0 = 0``). p: any shape of probabilities."""
     p = np.asarray(p, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore"):
-        terms = np.where(p > 0, p * np.log(np.where(p > 0, p, 1.0)), 0.0)
-    return -terms.sum(axis=axis)
+        return -np.where(p > 0, p * np.log(np.where(p > 0, p, 1.0)), 0.0).sum(axis=axis)
 
 
 def _of_order(p: np.ndarray, alpha: float, axis: int, of_power_sum) -> np.ndarray:
@@ -68,8 +66,7 @@ def _jensen(entropy, P: np.ndarray, weights: np.ndarray, alpha: float) -> float:
         raise ValueError(f"expected distributions (n, k) and weights (n,), got {P.shape} and {w.shape}")
     if np.any(w < 0) or not np.isclose(w.sum(), 1.0):
         raise ValueError(f"weights must be >= 0 and sum to 1 (sum {w.sum():.6g})")
-    mixture = w @ P
-    return float(entropy(mixture, alpha) - w @ entropy(P, alpha, axis=1))
+    return float(entropy(w @ P, alpha) - w @ entropy(P, alpha, axis=1))
 
 
 def jensen_tsallis(P: np.ndarray, weights: np.ndarray, alpha: float) -> float:

@@ -40,8 +40,7 @@ def truth_transform(truth: dict[str, Any] | None, fixed: Image) -> RigidTransfor
         raise StageError("evaluate needs a known transform: give pairs[].truth, pairs_csv.truth_columns, "
                          "or a misalign stage before it")
     names = NAMES[fixed.dim]
-    unknown = sorted(set(truth) - set(names) - {"center"})
-    if unknown:
+    if unknown := sorted(set(truth) - set(names) - {"center"}):
         raise StageError(f"truth has unknown keys {unknown}; expected {', '.join(names)} (and center)")
     try:
         values = [float(truth.get(n, 0.0)) for n in names]

@@ -125,13 +125,9 @@ class Image:
     def shrink_to(self, spacing: float, min_size: int = 1) -> "Image":
         """:meth:`shrink` by the integer factor per axis that brings the spacing closest to ``spacing`` (never
         finer than native), keeping at least ``min_size`` pixels per axis: a physical-space pyramid level."""
-        factors = []
-        for n, s in zip(self.size, self.spacing):
-            f = max(1, min(int(round(spacing / s)), n))  # never more than the axis has pixels
-            if n // f < min_size:  # the largest factor that keeps min_size pixels (was a countdown: hours for 1e-30 mm)
-                f = max(1, n // max(min_size, 1))
-            factors.append(f)
-        return self.shrink(factors)
+        # per axis the nearest factor, at most the largest keeping min_size pixels (a countdown took hours at 1e-30 mm)
+        return self.shrink([min(max(1, int(round(spacing / s))), max(1, n // max(min_size, 1)))
+                            for n, s in zip(self.size, self.spacing)])
 
     def smoothed(self, sigma: float) -> "Image":
         """The same grid blurred by a Gaussian of ``sigma`` physical units along every axis (edges by nearest
@@ -186,9 +182,7 @@ def foreground_mask(image: Image) -> np.ndarray:
     negative); the whole grid in between (the object fills the frame: no background to tell it from)."""
     above = image.data > otsu_threshold(image.data)
     share = float(above[border(above.shape)].mean())
-    if share <= 0.5:
-        return above
-    return ~above if share >= 0.9 else np.ones_like(above)
+    return above if share <= 0.5 else ~above if share >= 0.9 else np.ones_like(above)
 
 
 def grow(mask: np.ndarray, distance: float, spacing=None) -> np.ndarray:

@@ -24,12 +24,9 @@ def corners(index: np.ndarray, size) -> list[tuple[np.ndarray, np.ndarray]]:
     C0 = np.minimum(U.astype(np.intp), np.maximum(hi.astype(np.intp) - 1, 0))
     F = U - C0
     strides = np.cumprod((1,) + tuple(size)[:-1])[:, None]
-    out = []
-    for corner in itertools.product((0, 1), repeat=len(size)):
-        bit = np.array(corner)[:, None]
-        out.append((np.prod(np.where(bit == 1, F, 1.0 - F), axis=0),
-                    (np.minimum(C0 + bit, hi.astype(np.intp)) * strides).sum(axis=0)))
-    return out
+    bits = [np.array(corner)[:, None] for corner in itertools.product((0, 1), repeat=len(size))]
+    return [(np.prod(np.where(bit == 1, F, 1.0 - F), axis=0),
+             (np.minimum(C0 + bit, hi.astype(np.intp)) * strides).sum(axis=0)) for bit in bits]
 
 
 def inside(index: np.ndarray, size) -> np.ndarray:

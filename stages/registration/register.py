@@ -377,7 +377,8 @@ class _Run:
             rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
                                                    for a in c.angles])
             polish = [np.zeros(3)]
-        images = SearchImages(self.fixed, self.moving, center=self.center, min_overlap=self.params.metric.min_overlap)
+        images = SearchImages(self.fixed, self.moving, center=self.center, min_overlap=self.params.metric.min_overlap,
+                              region=self.mask)
         return grid_search(images, rotations, lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
                            steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
 
@@ -426,8 +427,7 @@ def check_overlap(run: _Run, theta, value, stop) -> list[Flag]:
 def check_bounds(run: _Run, theta, value, stop) -> list[Flag]:
     """Clipped iterates pile up on a bound when the optimum lies beyond it: a result within one unit
     (translation, or arc at the RMS radius) of a bound."""
-    tol = run.scales
-    at = (theta <= run.lower + tol) | (theta >= run.upper - tol)
+    at = (theta <= run.lower + run.scales) | (theta >= run.upper - run.scales)
     if not at.any():
         return []
     names = [n for n, b in zip(run.at(theta).names, at) if b]
@@ -637,10 +637,9 @@ def check_flatness(run: _Run, theta, value, stop) -> list[Flag]:
     content's RMS radius)."""
     if (threshold := run.params.check.min_flatness) <= 0:
         return []
-    fg = np.argwhere(content := foreground_mask(run.fixed))  # a search copy scaled to the fixed content's extent
-    extent = (fg.max(axis=0) - fg.min(axis=0) + 1)[::-1] * np.asarray(run.fixed.spacing)
+    content = foreground_mask(run.fixed)  # a search copy scaled to the fixed content's extent
     images = SearchImages(run.fixed, run.moving, center=run.center, min_overlap=run.params.metric.min_overlap,
-                          spacing=max(search_spacing([run.fixed, run.moving]) / 4, float(extent.min()) / 24))
+                          spacing=max(search_spacing([run.fixed, run.moving]) / 4, search_spacing([run.fixed], content)))
     radius = rms_radius(run.fixed, content)
     ratio, u = flatness(lambda t: images.score(t, min_overlap=0.0), theta, dim=run.dim, reach=6.0 * images.spacing,
                         radius=radius)

@@ -1,10 +1,10 @@
 """Coarse exhaustive search for the self-check, 2D and 3D: the measure on a grid of rigid transforms.
 
-On a small copy of both images (smaller side ~``SEARCH_SIDE`` pixels, ``SEARCH_BINS`` bins, nearest neighbour, at most
-``SEARCH_SAMPLES`` samples), scored with Jensen-Tsallis of order 2 (histogram weights, the closed form) whatever the
-registration's measure: a detector of basins, not the objective. All translations of one rotation are one
-``np.bincount`` (the moving bins on a padded canvas whose padding holds an "outside" bin). It answers the capture,
-content, prominence and flatness questions of the self-check (docs/registration.md)."""
+On a small copy of both images (smaller side ~``SEARCH_SIDE`` pixels: of the fixed sampling region, if given, and its
+samples only; ``SEARCH_BINS`` bins, nearest neighbour, at most ``SEARCH_SAMPLES`` samples), scored with JT of order 2
+(histogram weights, closed form) whatever the registration's measure: a detector of basins, not the objective. All
+translations of one rotation are one ``np.bincount`` (the moving bins on a canvas whose padding holds an "outside" bin).
+It answers the capture, content, prominence and flatness questions of the self-check (docs/registration.md)."""
 
 from __future__ import annotations
 
@@ -38,9 +38,11 @@ def batch_jensen_tsallis2(h: np.ndarray) -> np.ndarray:
         return first - np.einsum("bj,bj->b", cols, cols) / (N * N)
 
 
-def search_spacing(images: list[Image]) -> float:
-    """The physical spacing that brings the smaller physical extent of the images to about ``SEARCH_SIDE`` pixels."""
-    return min(float(min(np.asarray(im.size) * np.asarray(im.spacing))) for im in images) / SEARCH_SIDE
+def search_spacing(images: list[Image], region: np.ndarray | None = None) -> float:
+    """The spacing that brings the images' smaller physical extent (the first's: ``region``'s box) to ~``SEARCH_SIDE`` pixels."""
+    box = np.argwhere(region) if region is not None else ()
+    sizes = [(box.max(axis=0) - box.min(axis=0) + 1)[::-1] if len(box) else images[0].size] + [im.size for im in images[1:]]
+    return min(float(min(np.asarray(n) * np.asarray(im.spacing))) for n, im in zip(sizes, images)) / SEARCH_SIDE
 
 
 def _accepted(raw: np.ndarray, overlaps: np.ndarray, min_overlap: float) -> np.ndarray:
@@ -51,18 +53,20 @@ def _accepted(raw: np.ndarray, overlaps: np.ndarray, min_overlap: float) -> np.n
 class SearchImages:
     """Fixed and moving image at the search resolution, ready to score many transforms at once: transforms in
     physical units about ``center`` (d,), ``-inf`` with fewer than ``min_overlap`` of the fixed samples inside the
-    moving image; each image block-averaged by the integer factor per axis that comes closest below ``spacing``
-    (physical; default :func:`search_spacing` of both images)."""
+    moving image; each image block-averaged by the integer factor per axis that comes closest below ``spacing`` (default:
+    :func:`search_spacing`); the fixed samples: the blocks holding a pixel of ``region`` (bool, ``fixed``'s shape), or all."""
 
-    def __init__(self, fixed: Image, moving: Image, *, center, min_overlap: float, spacing: float | None = None):
-        spacing = search_spacing([fixed, moving]) if spacing is None else spacing
+    def __init__(self, fixed: Image, moving: Image, *, center, min_overlap: float, spacing: float | None = None,
+                 region: np.ndarray | None = None):
+        spacing = search_spacing([fixed, moving], region) if spacing is None else spacing
         fixed_small, self.moving_small = (im.shrink([max(1, int(spacing // s)) for s in im.spacing])
                                           for im in (fixed, moving))
         self.spacing, self.dim, self.center = spacing, fixed.dim, np.asarray(center, dtype=np.float64)
         self.min_overlap = float(min_overlap)
         fb, mb = Binning.of(fixed.data, SEARCH_BINS), Binning.of(moving.data, SEARCH_BINS)
         self.K, self._moving_bins = fb.bins * mb.bins, mb.bins
-        flat = np.arange(fixed_small.data.size)
+        flat = np.arange(fixed_small.data.size) if region is None or not region.any() else np.flatnonzero(
+            fixed.with_data(region.astype(np.float64)).shrink([max(1, int(spacing // s)) for s in fixed.spacing]).data)
         if len(flat) > SEARCH_SAMPLES:
             flat = np.sort(np.random.default_rng(0).choice(flat, SEARCH_SAMPLES, replace=False))
         self._P = (fixed_small.points(flat) - self.center).T  # (d, n)
@@ -93,8 +97,7 @@ class SearchImages:
         U = np.floor(self._inv @ q + 0.5).astype(np.intp)  # (d, n) moving search indices (ties up: shift-exact)
         low = U.min(axis=1) + steps.min(axis=0)
         high = U.max(axis=1) + steps.max(axis=0) - np.asarray(self.moving_small.size) + 1
-        need = max(0, int((-low).max()), int(high.max()))
-        self._canvas(need)
+        self._canvas(max(0, int((-low).max()), int(high.max())))
         base = ((U + self._pad) * self._strides[:, None]).sum(axis=0)
         return base.astype(np.int32)[None, :] + (steps @ self._strides).astype(np.int32)[:, None]
 

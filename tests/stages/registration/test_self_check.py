@@ -15,13 +15,13 @@ import pytest
 from tests_paths import ITK_DIR
 from topomatch.stages.registration.divergence import jensen_tsallis_histogram
 from topomatch.stages.registration.evaluate import tre_points
-from topomatch.stages.registration.image import Image
+from topomatch.stages.registration.image import Image, foreground_mask
 from topomatch.stages.registration.io import read_image
 from topomatch.stages.registration.misalign import make_case, moved
 from topomatch.stages.registration.params import RegisterParams
 from topomatch.stages.registration.register import register
 from topomatch.stages.registration.search import (GridSearch, SearchImages, batch_jensen_tsallis2, directions, flatness,
-                                                  grid_search)
+                                                  grid_search, search_spacing)
 from topomatch.stages.registration.structure import object_mask
 from topomatch.stages.registration.transform import RigidTransform, target_registration_error
 
@@ -65,6 +65,32 @@ def test_grid_scores_equal_single_scores(pd_slice, small_t1, d):
     assert grid.n_coarse == len(rotations) * 5 ** d
     for i in range(0, len(grid.thetas), 37):
         assert grid.values[i] == pytest.approx(images.score(grid.thetas[i]), rel=1e-12, abs=1e-15)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_search_with_a_region_ignores_an_empty_margin_of_the_fixed_grid(pd_slice, small_t1, d):
+    """Thirty-ninth round: with the sampling region, the search copy is scaled to the region and samples only it, so
+    background added around the fixed grid (whole search blocks, the same physical placement) changes no score; without
+    it the copy is scaled to the grid and the scores move."""
+    fixed = pd_slice if d == 2 else small_t1
+    moving = moved(fixed, RigidTransform(((0.3,) if d == 2 else (0.1, 0.0, 0.2)) + (12.0, -7.0, 3.0)[:d],
+                                         tuple(fixed.center)))
+    region = foreground_mask(fixed)
+    factor = [max(1, int(search_spacing([fixed, moving], region) // s)) for s in fixed.spacing]  # ITK order
+    whole = [(0, -n % f) for n, f in zip(fixed.shape, factor[::-1])]  # the grid in whole blocks (none dropped)
+    fixed, region = fixed.with_data(np.pad(fixed.data, whole, constant_values=fixed.data.min())), np.pad(region, whole)
+    pad = [(3 * f, 5 * f) for f in factor[::-1]]  # array order, whole blocks on the low side
+    low = np.array([p[0] for p in pad])[::-1] * np.asarray(fixed.spacing)
+    padded = Image(np.pad(fixed.data, pad, constant_values=fixed.data.min()), fixed.spacing,
+                   tuple(np.asarray(fixed.origin) - fixed.direction @ low), fixed.direction)
+    rotations = np.radians([[0.0], [45.0]]) if d == 2 else np.radians([[0, 0, 0], [30, 0, 0]])
+    grids = [grid_search(SearchImages(f, moving, center=fixed.center, min_overlap=0.25, region=r), rotations,
+                         lambda a: np.full(d, 3.0), steps=5, half_width=40.0)
+             for f, r in ((fixed, region), (padded, np.pad(region, pad)), (fixed, None), (padded, None))]
+    n = grids[0].n_coarse  # the regular grid (the polished points follow the best cells, ties in any order)
+    np.testing.assert_array_equal(grids[0].thetas[:n], grids[1].thetas[:n])
+    np.testing.assert_allclose(grids[0].raw[:n], grids[1].raw[:n], rtol=1e-12, atol=1e-15)
+    assert not np.allclose(grids[2].raw[:n], grids[3].raw[:n], equal_nan=True)
 
 
 def test_directions_cover_every_axis_pair_once():
@@ -406,7 +432,7 @@ def test_stability_flags_a_result_another_sample_moves_farther_than_its_limit(pd
 def test_a_start_without_overlap_says_so_and_suggests_swapping(pd_slice):
     """A 32 x 32 moving patch of a 181 x 217 fixed slice: 2 % of the fixed samples overlap it at the start. The
     ``start`` flag names the overlap (not the optimiser's stop reason) and suggests the swap that works."""
-    from topomatch.stages.registration.image import Image
+    from topomatch.stages.registration.image import Image, foreground_mask
     from topomatch.stages.registration.register import register
 
     patch = Image(pd_slice.data[90:122, 70:102], name="patch")

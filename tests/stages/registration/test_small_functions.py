@@ -83,6 +83,10 @@ def test_search_spacing_brings_the_smaller_extent_to_the_search_side():
     assert search_spacing([a, b]) == pytest.approx(50.0 / SEARCH_SIDE)
     c = Image(np.zeros((8, 30, 30)), spacing=(1.0, 1.0, 3.0))  # 30 x 30 x 24 units
     assert search_spacing([c]) == pytest.approx(24.0 / SEARCH_SIDE)
+    region = np.zeros((50, 100), dtype=bool)
+    region[10:30, 20:95] = True  # 75 x 20 units of a's grid: the first image's extent is the region's box
+    assert search_spacing([a, b], region) == pytest.approx(20.0 / SEARCH_SIDE)
+    assert search_spacing([a, b], np.zeros_like(region)) == pytest.approx(50.0 / SEARCH_SIDE)  # empty: the grid's
 
 
 def test_display_window_and_checkerboard():
