@@ -625,8 +625,9 @@ def check_prominence(run: _Run, theta, value, stop) -> list[Flag]:
         return []
     prominence = run.measures["prominence"] = (grid := run.grid()).prominence(grid.images.score(theta, min_overlap=0.0))
     if prominence < c.min_prominence and (c.outline_prominence or not run.outline_only):
-        return [Flag("prominence", f"the result is not a distinct optimum: it scores {prominence:.1f} median absolute "
-                                   f"deviations above a typical transform of a coarse search (min_prominence "
+        score = (f"it scores {prominence:.1f} median absolute deviations above a typical transform of a coarse search"
+                 if math.isfinite(prominence) else "no transform of a coarse search overlaps enough to compare it with")
+        return [Flag("prominence", f"the result is not a distinct optimum: {score} (min_prominence "
                                    f"{c.min_prominence:g}); the images may share too little content")]
     return []
 

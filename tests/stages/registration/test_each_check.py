@@ -322,6 +322,19 @@ def test_prominence_separates_the_truth_from_a_typical_transform(pd_run):
     assert pd_run.measures["prominence"] < pd_run.params.check.min_prominence
 
 
+def test_prominence_says_so_when_no_search_transform_overlaps_enough(pd_slice):
+    """A moving image a quarter of the fixed grid, with a 90 % overlap bound: no transform of the coarse search keeps
+    90 % of the fixed samples inside it, the prominence is -inf and the flag says why instead of printing -inf."""
+    h, w = pd_slice.shape
+    moving = Image(pd_slice.data[h // 4: 3 * h // 4, w // 4: 3 * w // 4], origin=(w // 4, h // 4))
+    params = for_dimension(RegisterParams(metric={"min_overlap": 0.9}), 2)
+    run = reg._Run(pd_slice, moving, params, reg.sample_mask(pd_slice, params), None)
+    run.measures, run.better = {}, None
+    flags = reg.check_prominence(run, np.zeros(3), 0.0, "")
+    assert [f.check for f in flags] == ["prominence"] and run.measures["prominence"] == -math.inf
+    assert "no transform of a coarse search overlaps enough" in flags[0].message and "-inf" not in flags[0].message
+
+
 def test_capture_finds_the_truth_from_a_wrong_basin_and_offers_it(pd_run):
     """At a transform 150 deg and 22 px from the truth, a better basin is found and, run through the schedule, ends
     at the truth (``run.better``, which ``register`` adopts with ``check.retry``); at the truth nothing is better."""
