@@ -40,8 +40,9 @@ def batch_jensen_tsallis2(h: np.ndarray) -> np.ndarray:
 
 def search_spacing(images: list[Image], region: np.ndarray | None = None) -> float:
     """The spacing that brings the images' smaller physical extent (the first's: ``region``'s box) to ~``SEARCH_SIDE`` pixels."""
-    box = np.argwhere(region) if region is not None else ()
-    sizes = [(box.max(axis=0) - box.min(axis=0) + 1)[::-1] if len(box) else images[0].size] + [im.size for im in images[1:]]
+    held = [np.flatnonzero(region.any(axis=tuple(set(range(region.ndim)) - {k}))) for k in range(region.ndim)] \
+        if region is not None and region.any() else None  # the indices the region holds along each array axis
+    sizes = [[h[-1] - h[0] + 1 for h in held][::-1] if held else images[0].size] + [im.size for im in images[1:]]
     return min(float(min(np.asarray(n) * np.asarray(im.spacing))) for n, im in zip(sizes, images)) / SEARCH_SIDE
 
 
