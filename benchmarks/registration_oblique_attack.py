@@ -34,7 +34,8 @@ Splits:
   1 % of the cases. The round is merged if the rule holds in both dimensions; ``final41``
   (``registration_corpus.py``) is then run once with whichever code it decides. Nothing is chosen on it. Outcome: every
   condition held (3D false flags 11 -> 5 with JT and MI, 2D 5 -> 5, no silent or correct count changed), so the round was
-  merged (docs/registration.md, the thirty-ninth round).
+  merged (docs/registration.md, the thirty-ninth round), then kept in 3D only (``check.search_region``): in 2D it had
+  shown no gain here and it silenced three seen wrong results (``registration_prominence_catches.py``).
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_oblique_attack.py --split oblique \\
         --dims 3 --cases-scale 4 --json benchmarks/results/registration_oblique_attack_3d.json

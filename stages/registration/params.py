@@ -200,6 +200,8 @@ class CheckSpec(Params):
                                   description="flag a result less than this many median absolute deviations above "
                                               "the coarse search's median")
     outline_prominence: bool = Field(True, description="the prominence test judges outline-only pairs too (3D: no)")
+    search_region: bool = Field(False, description="the coarse search is scaled to the fixed sampling region and "
+                                "samples only it (thirty-ninth round; 3D: yes)")
     min_flatness: float = Field(0.1, ge=0, le=1, allow_inf_nan=False,
                                 description="flag a result from which the measure, on a copy of the images scaled to "
                                             "their content, falls in its flattest direction less than this fraction "
@@ -296,7 +298,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "coarse_overlap_power": 1.0, "label_smoothing": 0.0, "label_samples": 4.0,  # 36th, 37th rounds
         "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
                   "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
-                  "outline_view_partner": False, "outline_prominence": False},
+                  "outline_view_partner": False, "outline_prominence": False, "search_region": True},
     },
 }
 

@@ -378,7 +378,7 @@ class _Run:
                                                    for a in c.angles])
             polish = [np.zeros(3)]
         images = SearchImages(self.fixed, self.moving, center=self.center, min_overlap=self.params.metric.min_overlap,
-                              region=self.mask)
+                              region=self.mask if c.search_region else None)
         return grid_search(images, rotations, lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
                            steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
 
