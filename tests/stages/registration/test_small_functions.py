@@ -87,6 +87,11 @@ def test_search_spacing_brings_the_smaller_extent_to_the_search_side():
     region[10:30, 20:95] = True  # 75 x 20 units of a's grid: the first image's extent is the region's box
     assert search_spacing([a, b], region) == pytest.approx(20.0 / SEARCH_SIDE)
     assert search_spacing([a, b], np.zeros_like(region)) == pytest.approx(50.0 / SEARCH_SIDE)  # empty: the grid's
+    box = np.zeros((8, 30, 30), dtype=bool)
+    box[2:5, 3:4, 10:28] = True  # (k, j, i): 18 x 1 x 9 units of c's grid (z spacing 3)
+    assert search_spacing([c], box) == pytest.approx(1.0 / SEARCH_SIDE)
+    box[2:5, 3:23, 10:28] = True  # 18 x 20 x 9 units
+    assert search_spacing([c], box) == pytest.approx(9.0 / SEARCH_SIDE)
 
 
 def test_display_window_and_checkerboard():
