@@ -43,7 +43,6 @@ Splits:
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -110,7 +109,7 @@ def oblique_case(spec: corpus.CaseSpec, build) -> corpus.Case:
     for role in roles:
         images[role] = regrid(images[role], oblique_direction(rng, spec.dim),
                               nearest=spec.kind in NEAREST and role == kind_role)
-    return corpus.Case(dataclasses.replace(spec), images["fixed"], images["moving"], case.truth)
+    return corpus.Case(spec, images["fixed"], images["moving"], case.truth)
 
 
 def register_split() -> None:

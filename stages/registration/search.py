@@ -59,15 +59,16 @@ class SearchImages:
 
     def __init__(self, fixed: Image, moving: Image, *, center, min_overlap: float, spacing: float | None = None,
                  region: np.ndarray | None = None):
+        region = region if region is not None and region.any() else None  # an empty region: every pixel
         spacing = search_spacing([fixed, moving], region) if spacing is None else spacing
-        fixed_small, self.moving_small = (im.shrink([max(1, int(spacing // s)) for s in im.spacing])
-                                          for im in (fixed, moving))
+        factors = [[max(1, int(spacing // s)) for s in im.spacing] for im in (fixed, moving)]
+        fixed_small, self.moving_small = fixed.shrink(factors[0]), moving.shrink(factors[1])
         self.spacing, self.dim, self.center = spacing, fixed.dim, np.asarray(center, dtype=np.float64)
         self.min_overlap = float(min_overlap)
         fb, mb = Binning.of(fixed.data, SEARCH_BINS), Binning.of(moving.data, SEARCH_BINS)
         self.K, self._moving_bins = fb.bins * mb.bins, mb.bins
-        flat = np.arange(fixed_small.data.size) if region is None or not region.any() else np.flatnonzero(
-            fixed.with_data(region.astype(np.float64)).shrink([max(1, int(spacing // s)) for s in fixed.spacing]).data)
+        flat = np.arange(fixed_small.data.size) if region is None else np.flatnonzero(
+            fixed.with_data(region).shrink(factors[0]).data)  # the blocks holding a region pixel
         if len(flat) > SEARCH_SAMPLES:
             flat = np.sort(np.random.default_rng(0).choice(flat, SEARCH_SAMPLES, replace=False))
         self._P = (fixed_small.points(flat) - self.center).T  # (d, n)
