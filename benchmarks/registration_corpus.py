@@ -242,6 +242,14 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final41``: declared (2026-12-06, eighth session) with the thirty-ninth round (the coarse search scaled to and
   sampling the fixed image's sampling region), before any run of it, the design of ``final40``, fresh seeds 75xxx;
   run once with whichever code ``oblique`` decides (``registration_oblique_attack.py``).
+- ``spread``: the decision split of the fortieth round (a pair in which either image is little spread inside its solid
+  object, ``structure.interior_spread`` below ``metric.outline_spread``, is measured at ``metric.outline_alpha``),
+  declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: the two kinds whose
+  interior is compressed (saturated, PD-like) from every source, fresh seeds 76xxx. Rule, per dimension, JT rows (MI
+  is the same measure either way): silent errors do not rise, correct results do not fall, false flags do not rise
+  by more than 1 % of the rows.
+- ``final42``: declared with ``spread``, before any run of it, the design of ``final41``, fresh seeds 77xxx; run once
+  with whichever code ``spread`` decides.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -325,7 +333,9 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 42)},  # final7 to final41: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 43)},  # final7 to final42: one design, fresh seeds each
+    "spread": {3: [("mni", 8), ("mni15", 8), ("kmeans", 8), ("anatomical", 8)],
+               2: [("mni-axial", 16), ("mni-coronal", 16), ("mni-sagittal", 16), ("itk", 16)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "capture": {3: [("anatomical", 60)], 2: [("itk", 80)]},
@@ -347,7 +357,8 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 42)},  # final8 to final41
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 43)},  # final8 to final42
+         "spread": ("saturated", "pd"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -493,6 +504,12 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final41", "mni", 3): 75103, ("final41", "mni15", 3): 75703, ("final41", "kmeans", 3): 75203,
          ("final41", "anatomical", 3): 75303, ("final41", "mni-axial", 2): 75102, ("final41", "mni-coronal", 2): 75402,
          ("final41", "mni-sagittal", 2): 75502, ("final41", "itk", 2): 75602,
+         ("spread", "mni", 3): 76103, ("spread", "mni15", 3): 76703, ("spread", "kmeans", 3): 76203,
+         ("spread", "anatomical", 3): 76303, ("spread", "mni-axial", 2): 76102, ("spread", "mni-coronal", 2): 76402,
+         ("spread", "mni-sagittal", 2): 76502, ("spread", "itk", 2): 76602,
+         ("final42", "mni", 3): 77103, ("final42", "mni15", 3): 77703, ("final42", "kmeans", 3): 77203,
+         ("final42", "anatomical", 3): 77303, ("final42", "mni-axial", 2): 77102, ("final42", "mni-coronal", 2): 77402,
+         ("final42", "mni-sagittal", 2): 77502, ("final42", "itk", 2): 77602,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -509,7 +526,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
