@@ -250,6 +250,11 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   by more than 1 % of the rows.
 - ``final42``: declared with ``spread``, before any run of it, the design of ``final41``, fresh seeds 77xxx; run once
   with whichever code ``spread`` decides.
+- ``outline3d``: the decision split of the forty-first round (in 3D the outline test's drop, ``check.outline_drop``,
+  no longer flags: its 3D flags on the seen report splits were all on correct results or on results other tests
+  refused too), declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: 3D only, the
+  outline-only kinds (silhouette, resampled silhouette, saturated) from every source, fresh seeds 78xxx. Rule, JT and
+  MI rows (the round only removes a flag: no estimate moves): silent errors do not rise with either metric.
 
 ``--cases-scale`` scales every count. A draw whose image cannot be registered at all (constant: a crop window
 that misses the object; first seen on ``final3``) is not a case: it is listed under ``invalid`` in the JSON and
@@ -334,6 +339,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     **{f"final{n}": FINAL_DESIGN for n in range(7, 43)},  # final7 to final42: one design, fresh seeds each
+    "outline3d": {3: [("mni", 12), ("mni15", 12), ("kmeans", 12), ("anatomical", 12)]},
     "spread": {3: [("mni", 8), ("mni15", 8), ("kmeans", 8), ("anatomical", 8)],
                2: [("mni-axial", 16), ("mni-coronal", 16), ("mni-sagittal", 16), ("itk", 16)]},
     "edge": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
@@ -359,6 +365,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          **{f"final{n}": ELEVEN_KINDS for n in range(8, 43)},  # final8 to final42
          "spread": ("saturated", "pd"),
+         "outline3d": ("silhouette", "silhouette_resampled", "saturated"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "tight": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "capture": ("labels", "silhouette", "threshold", "saturated"),
@@ -510,6 +517,8 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("final42", "mni", 3): 77103, ("final42", "mni15", 3): 77703, ("final42", "kmeans", 3): 77203,
          ("final42", "anatomical", 3): 77303, ("final42", "mni-axial", 2): 77102, ("final42", "mni-coronal", 2): 77402,
          ("final42", "mni-sagittal", 2): 77502, ("final42", "itk", 2): 77602,
+         ("outline3d", "mni", 3): 78103, ("outline3d", "mni15", 3): 78703, ("outline3d", "kmeans", 3): 78203,
+         ("outline3d", "anatomical", 3): 78303,
          ("edge", "mni-axial", 2): 1702, ("edge", "mni-coronal", 2): 1712, ("edge", "mni-sagittal", 2): 1722,
          ("tight", "mni-axial", 2): 1802, ("tight", "mni-coronal", 2): 1812, ("tight", "mni-sagittal", 2): 1822,
          ("capture", "anatomical", 3): 1903, ("capture", "itk", 2): 1902,
@@ -526,7 +535,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
