@@ -490,7 +490,7 @@ def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
 def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     """A biased optimum: from the result, the finest level climbs a second measure on the same samples and ends more
     than a limit away: JT (alpha 2) for every other measure (``check.agreement``), mutual information for JT itself
-    (``check.mi_agreement``, twelfth round). Not asked where the measure is of order 1 already (outline measure)."""
+    (``check.mi_agreement``, twelfth round). Not asked on outline and discrete pairs, nor where JT is at order 1 already."""
     m, c = run.params.metric, run.params.check
     thesis = m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"
     key = "mi_" * thesis + "agreement"
