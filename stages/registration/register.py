@@ -160,7 +160,8 @@ class _Run:
         self.outline_only = bool(_below_outline_thresholds(self))
         self.levels_count = self._levels_count()
         self.outline_measure = self.outline_only or self.levels_count is not None
-        self.metric = params.metric.for_outline() if self.outline_measure else params.metric
+        spread = min((v for k, v in self.structures.items() if k.startswith("spread_")), default=math.inf)
+        self.metric = params.metric.for_outline() if self.outline_measure or spread < params.metric.outline_spread else params.metric
         self.levels = self._pyramid()
         self.radius = rms_radius(fixed, mask)
         self.scales = np.r_[[1.0 / self.radius] * self.k, [1.0] * self.dim]
@@ -489,11 +490,11 @@ def check_consistency(run: _Run, theta, value, stop) -> list[Flag]:
 def check_agreement(run: _Run, theta, value, stop) -> list[Flag]:
     """A biased optimum: from the result, the finest level climbs a second measure on the same samples and ends more
     than a limit away: JT (alpha 2) for every other measure (``check.agreement``), mutual information for JT itself
-    (``check.mi_agreement``, twelfth round). Not asked on outline-only pairs, whose measure is already of order 1."""
+    (``check.mi_agreement``, twelfth round). Not asked on outline and discrete pairs, nor where JT is at order 1 already."""
     m, c = run.params.metric, run.params.check
     thesis = m.name == "jt" and m.alpha == 2.0 and m.weights == "histogram"
     key = "mi_" * thesis + "agreement"
-    if (limit := getattr(c, key)) <= 0 or run.outline_measure:
+    if (limit := getattr(c, key)) <= 0 or run.outline_measure or run.metric is not m:
         return []
     name, second = ("mutual information", "mi") if thesis else ("Jensen-Tsallis (alpha 2, the thesis's measure)", "jt")
     finest = run.levels[-1]
@@ -738,7 +739,7 @@ def describe(t: RigidTransform) -> str:
 def self_check(run: _Run, theta: np.ndarray, value: float, stop: str) -> list[Flag]:
     """The flags of every test of :data:`CHECKS` at the result; ``run.better`` is the capture test's better end."""
     run.better, run.measures = None, dict(run.structures)
-    if run.outline_measure and run.metric.alpha != run.params.metric.alpha:
+    if run.metric.alpha != run.params.metric.alpha:
         run.measures["outline_alpha"] = run.metric.alpha
     if run.levels_count is not None:
         run.measures["discrete_levels"] = run.levels_count

@@ -438,3 +438,41 @@ def test_interior_structure_equals_its_definition_computed_with_scipy(pd_slice, 
                                                                                  truncate=3.0))))
     assert band.sum() > 100 and inside.sum() > 100
     assert interior_structure(image) == pytest.approx(magnitude[inside].mean() / magnitude[band].mean(), rel=1e-9)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_a_pair_little_spread_inside_its_object_is_measured_at_order_one_below_the_threshold_only(d):
+    """KmeansTest's T1 against a copy saturated at its content's 10th percentile (2 % noise: structure inside, so not
+    outline-only) moved by a known T, in 3D and as its middle axial section. With ``metric.outline_spread`` above the
+    copy's interior spread, JT is measured at ``metric.outline_alpha`` (recorded; the same parameters as asking for
+    alpha 1; no agreement test) and T is recovered to a voxel; at the default, which that spread exceeds, the pair
+    is ordinary: bit-identical to the setting off (fortieth round)."""
+    from pathlib import Path
+
+    from topomatch.stages.registration.image import foreground_mask
+    from topomatch.stages.registration.io import read_image
+    from topomatch.stages.registration.misalign import moved
+    from topomatch.stages.registration.params import RegisterParams
+    from topomatch.stages.registration.register import register
+    from topomatch.stages.registration.transform import RigidTransform, target_registration_error
+
+    volume = read_image(str(Path(__file__).resolve().parents[3] / "data/images/itk/KmeansTest_T1UCharRaw.nii.gz"))
+    fixed = volume if d == 3 else Image(volume.data[volume.shape[0] // 2], spacing=volume.spacing[:2])
+    level = np.percentile(fixed.data[foreground_mask(fixed)], 10)
+    rng = np.random.default_rng(4)
+    saturated = fixed.with_data(np.minimum(fixed.data, level) + rng.normal(0.0, 0.02 * level, fixed.shape))
+    truth = RigidTransform.from_degrees((4.0,) * (1 if d == 2 else 3) + (3.0, -2.0, 4.0)[:d], fixed.center)
+    moving = moved(saturated, truth)
+    spread = interior_spread(moving)
+    assert RegisterParams().check.min_spread < RegisterParams().metric.outline_spread < spread < 0.3
+
+    def run(**metric):
+        return register(fixed, moving, RegisterParams.model_validate({"metric": metric}))
+
+    low = run(outline_spread=0.3)
+    assert low.measures["outline_alpha"] == 1.0 and "agreement" not in low.measures and low.ok
+    assert np.array_equal(low.transform.parameters, run(outline_spread=0.3, alpha=1.0).transform.parameters)
+    assert target_registration_error(low.transform, truth, fixed.points()).mean() < max(fixed.spacing)
+    default, off = run(), run(outline_spread=0.0)
+    assert "outline_alpha" not in default.measures and "agreement" in default.measures
+    assert np.array_equal(default.transform.parameters, off.transform.parameters) and default.value == off.value
