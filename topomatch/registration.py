@@ -62,7 +62,7 @@ class RegistrationOutcome:
     JSON fields (:meth:`to_dict`): ``fixed``, ``moving`` (names), ``dimension`` (2 or 3), ``convention``,
     ``names`` and ``parameters`` (SimpleITK's order: angles in radians, then the translation), ``angles``
     (degrees), ``translation``, ``center`` (c), ``matrix`` (the homogeneous fixed-to-moving matrix, row-major),
-    ``metric``, ``alpha`` (the order used: ``metric.outline_alpha`` on an outline-only pair), ``method``, ``objective`` (the measure at the result), ``iterations``,
+    ``metric``, ``alpha`` (the order used: ``metric.outline_alpha`` on an outline-only, discrete or little-spread pair), ``method``, ``objective`` (the measure at the result), ``iterations``,
     ``evaluations``, ``overlap``, ``seconds``, ``ok`` (the self-check passed), ``reason`` (why not) and
     ``flags`` (the names of the tests that failed); in 2D also ``tx``, ``ty`` and ``angle`` (degrees), the
     names of the previous release. Besides them: ``registration`` (the full
