@@ -190,9 +190,10 @@ class CheckSpec(Params):
                                            "outline) at the result: outlines that do not correspond at all "
                                            "(the validation corpus's correct outline-only results: at most 5.8); "
                                            "0 flags every such pair")
-    min_outline_view: float = Field(0.45, ge=0, le=1, allow_inf_nan=False, description="such a pair is flagged when "
+    min_outline_view: float = Field(0.5, ge=0, le=1, allow_inf_nan=False, description="such a pair is flagged when "
                                     "less than this fraction of the outline-only image's object boundary is outline "
-                                    "inside the grid, the rest cut by a border (structure.outline_in_view; 0: off)")
+                                    "inside the grid, the rest cut by a border (structure.outline_in_view; 0: off; "
+                                    "3D: 0.45)")
     outline_view_partner: bool = Field(True, description="the outline in view counts only what the other image "
                                        "sees at the result (a cropped partner's border cuts it too)")
     outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
@@ -301,7 +302,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "coarse_overlap_power": 1.0, "label_smoothing": 0.0, "label_samples": 4.0,  # 36th, 37th rounds
         "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
                   "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
-                  "outline_view_partner": False, "outline_prominence": False, "search_region": True},
+                  "outline_view_partner": False, "outline_prominence": False, "search_region": True, "min_outline_view": 0.45},
     },
 }
 

@@ -311,6 +311,14 @@ def test_outline_flags_outlines_apart_a_coarse_optimum_left_and_an_object_cut_by
     assert ask(reg.check_outline, run, np.zeros(3)) == ["outline"]
     assert run.measures["outline_view"] == pytest.approx(128 / (256 + 80))
     assert 128 / (256 + 80) < run.params.check.min_outline_view
+    # the top 10 rows: 128 / (256 + 20) = 0.46 of the boundary is outline, under half: refused in 2D since the
+    # forty-second round (0.5), passed at 3D's limit (0.45) asked for here
+    band = Image(100.0 * (rows < 10) + np.random.default_rng(0).normal(0, 2.0, rows.shape))
+    for limit, flags in ((None, ["outline"]), (0.45, [])):
+        run = make_run(band, band) if limit is None else make_run(band, band, min_outline_view=limit)
+        assert ask(reg.check_outline, run, np.zeros(3)) == flags
+        assert run.measures["outline_view"] == pytest.approx(128 / (256 + 20))
+    assert for_dimension(RegisterParams(), 3).check.min_outline_view == 0.45
 
 
 def test_prominence_separates_the_truth_from_a_typical_transform(pd_run):
