@@ -258,6 +258,12 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   correct results it newly flags.
 - ``final43``: declared with ``tight-outline``, before any run of it, the design of ``final42``, fresh seeds 80xxx; run
   once with whichever code ``tight-outline`` decides.
+- ``tight-outline-2``: the decision split of the forty-third round (in 2D an outline-only pair with less than 1.2 times
+  ``check.min_outline_view`` of its outline in view is also refused when the measure one unit from the result is
+  within ``check.outline_flat``, 2 %, of it: nothing pins the result to a unit), declared (2026-12-06, ninth session)
+  with the round's rule before either tree ran on it: the design of ``tight-outline``, fresh seeds 81xxx. The round
+  only adds a flag. Rule, JT and MI each: adopted if it refuses at least one silent error and at least as many silent
+  errors as correct results it newly flags.
 - ``outline3d``: the decision split of the forty-first round (in 3D the outline test's drop, ``check.outline_drop``,
   no longer flags: its 3D flags on the seen report splits were all on correct results or on results other tests
   refused too), declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: 3D only, the
@@ -348,6 +354,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     **{f"final{n}": FINAL_DESIGN for n in range(7, 44)},  # final7 to final43: one design, fresh seeds each
     "tight-outline": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
+    "tight-outline-2": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "outline3d": {3: [("mni", 12), ("mni15", 12), ("kmeans", 12), ("anatomical", 12)]},
     "spread": {3: [("mni", 8), ("mni15", 8), ("kmeans", 8), ("anatomical", 8)],
                2: [("mni-axial", 16), ("mni-coronal", 16), ("mni-sagittal", 16), ("itk", 16)]},
@@ -374,6 +381,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          **{f"final{n}": ELEVEN_KINDS for n in range(8, 44)},  # final8 to final43
          "tight-outline": ("silhouette", "silhouette_resampled"),
+         "tight-outline-2": ("silhouette", "silhouette_resampled"),
          "spread": ("saturated", "pd"),
          "outline3d": ("silhouette", "silhouette_resampled", "saturated"),
          "edge": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
@@ -531,6 +539,8 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("outline3d", "anatomical", 3): 78303,
          ("tight-outline", "mni-axial", 2): 79102, ("tight-outline", "mni-coronal", 2): 79402,
          ("tight-outline", "mni-sagittal", 2): 79502,
+         ("tight-outline-2", "mni-axial", 2): 81102, ("tight-outline-2", "mni-coronal", 2): 81402,
+         ("tight-outline-2", "mni-sagittal", 2): 81502,
          ("final43", "mni", 3): 80103, ("final43", "mni15", 3): 80703, ("final43", "kmeans", 3): 80203,
          ("final43", "anatomical", 3): 80303, ("final43", "mni-axial", 2): 80102, ("final43", "mni-coronal", 2): 80402,
          ("final43", "mni-sagittal", 2): 80502, ("final43", "itk", 2): 80602,
@@ -550,7 +560,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
@@ -799,7 +809,7 @@ def plan_case(split: str, source: str, dim: int, index: int, place: int) -> Case
     tight = split.startswith("final") or split in ("confirm", "holdout", "edge", "tight", "blur", "turn")
     frames = ["as-is", "crop", "pad"] + (["tight"] if tight else [])
     position, spacing, frame = float(rng.uniform()), int(rng.choice([1, 2])), str(rng.choice(frames))
-    if split in ("tight", "tight-outline"):  # every section tightly cropped (the same draws otherwise)
+    if split in ("tight", "tight-outline", "tight-outline-2"):  # every section tightly cropped (the same draws otherwise)
         frame = "tight"
     if split in EDGE_SPLITS:  # [0, 1) onto the two ends: [0, 0.12) and (0.88, 1]
         position = 2 * EDGE_FRACTION * position if position < 0.5 else 1 - 2 * EDGE_FRACTION * (1 - position)
