@@ -80,8 +80,7 @@ class OptimizerSpec(_Named):
                                                                       "fraction of a Newton step (0: off)")
     max_step: float | None = Field(None, gt=0, description="step blocking: longest step (physical units)")
     blocking: bool = Field(False, description="reject steps that lower the objective (one more evaluation each)")
-    shrink: float = Field(1.0, gt=0, le=1, allow_inf_nan=False, description="multiply the gain by this when a step "
-                                                                            "is blocked")
+    shrink: float = Field(1.0, gt=0, le=1, allow_inf_nan=False, description="multiply the gain by this when a step is blocked")
     tol: float = Field(0.0, ge=0, description="stop a level when `window` steps are shorter (physical units)")
     average_last: int = Field(1, ge=1, description="result of a level = mean of its last iterates")
     average_finest: int = Field(10, ge=1, description="the finest level's average_last (pairs not measured as outlines)")
@@ -192,8 +191,10 @@ class CheckSpec(Params):
                                            "0 flags every such pair")
     min_outline_view: float = Field(0.5, ge=0, le=1, allow_inf_nan=False, description="such a pair is flagged when "
                                     "less than this fraction of the outline-only image's object boundary is outline "
-                                    "inside the grid, the rest cut by a border (structure.outline_in_view; 0: off; "
-                                    "3D: 0.45)")
+                                    "inside the grid, the rest cut by a border (structure.outline_in_view; 0: off; 3D: 0.45)")
+    outline_flat: float = Field(0.02, ge=0, le=1, allow_inf_nan=False, description="such a pair with less than 1.2 "
+                                "times min_outline_view of its outline in view is flagged when the measure one unit from "
+                                "the result is within this fraction of it: nothing pins it to a unit (0: off; 3D: off)")
     outline_view_partner: bool = Field(True, description="the outline in view counts only what the other image "
                                        "sees at the result (a cropped partner's border cuts it too)")
     outline_drop: float = Field(0.003, ge=0, le=1, allow_inf_nan=False,
@@ -249,8 +250,7 @@ class RegisterParams(Params):
     """Parameters of :func:`~topomatch.stages.registration.register.register` (module docstring); fields left
     out take :data:`DIMENSION_DEFAULTS` for the images' dimension."""
 
-    metric: MetricSpec = Field(default_factory=MetricSpec, description="the measure: name, alpha, weights, "
-                                                                       "tmi_form, min_overlap")
+    metric: MetricSpec = Field(default_factory=MetricSpec, description="the measure: name, alpha, weights, tmi_form, min_overlap")
     optimizer: OptimizerSpec = Field(default_factory=OptimizerSpec, description="spsa or powell, and SPSA's gains")
     schedule: list[LevelSpec] = Field(default_factory=list, description="coarse-to-fine levels, LevelSpec's "
                                       "fields (default: the dimension's, docs/registration.md)")
@@ -258,8 +258,7 @@ class RegisterParams(Params):
     start: StartSpec = Field(default_factory=StartSpec, description="search for the start (3D default: steps 2)")
     bounds: BoundsSpec = Field(default_factory=BoundsSpec, description="search box: max_translation, max_angle")
     sampling: SamplingSpec = Field(default_factory=SamplingSpec, description="region, margin, jitter of the samples")
-    check: CheckSpec = Field(default_factory=CheckSpec, description="self-check: search, probes, thresholds, retry, "
-                                                                   "on_failure")
+    check: CheckSpec = Field(default_factory=CheckSpec, description="self-check: search, probes, thresholds, retry, on_failure")
     seed: int = Field(0, ge=0, description="seed of the SPSA perturbations and of the sample subsets")
     outline_smoothing: float = Field(1.0, ge=0, allow_inf_nan=False,
                                      description="on an outline-only or two-level pair, the finest level's "
@@ -297,12 +296,12 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         # 8, 4 and 2 mm (the 3D tune sets of docs/registration.md)
         "schedule": [_level(8.0, 16, 150, 4.0, 4.0, "parzen", 4000), _level(4.0, 24, 60, 1.0, 2.0, "parzen", 8000),
                      _level(2.0, 64, 40, 0.3, 1.0, "parzen", 30000, average=2, gain_alpha=1.0, settle=0.2, reruns=2)],
-        "start": {"steps": 2, "iterations": 40}, "optimizer": {"average_finest": 1},
-        "bounds": {"max_angle": 45.0},
+        "start": {"steps": 2, "iterations": 40}, "optimizer": {"average_finest": 1}, "bounds": {"max_angle": 45.0},
         "coarse_overlap_power": 1.0, "label_smoothing": 0.0, "label_samples": 4.0,  # 36th, 37th rounds
         "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
                   "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
-                  "outline_view_partner": False, "outline_prominence": False, "search_region": True, "min_outline_view": 0.45},
+                  "outline_view_partner": False, "outline_prominence": False, "search_region": True,
+                  "min_outline_view": 0.45, "outline_flat": 0.0},
     },
 }
 

@@ -117,8 +117,7 @@ _centroid = once_per_image(Image.centroid)  # the intensity centroid, once per i
 
 
 def sample_mask(fixed: Image, params: RegisterParams) -> np.ndarray | None:
-    """The fixed pixels the histograms sample (None: all): the Otsu foreground grown by ``sampling.margin``
-    (:func:`~topomatch.stages.registration.image.grow`)."""
+    """The fixed pixels the histograms sample (None: all): the Otsu foreground grown by ``sampling.margin`` (``grow``)."""
     if params.sampling.region == "all":
         return None
     return grow(foreground_mask(fixed), params.sampling.margin, fixed.spacing)
@@ -612,7 +611,10 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
           ([f"the finest level left the optimum a coarser level found (its measure {drop:.1%} lower there, lower on "
             f"{DROP_SAMPLES} other samples too; outline_drop {c.outline_drop:.1%})"] if drop > c.outline_drop else []) + \
           ([f"only {view:.0%} of the {role} image's object boundary is outline that both images see, the rest is cut "
-            f"by a grid's border (min_outline_view {c.min_outline_view:.0%})"] if view < c.min_outline_view else [])
+            f"by a grid's border (min_outline_view {c.min_outline_view:.0%})"] if view < c.min_outline_view else []) + \
+          ([f"the measure one unit from it is within {-ascent:.1%} of it, with {view:.0%} of the outline in view "
+            f"(outline_flat {c.outline_flat:.0%}): nothing pins the result to a unit"] if view < 1.2 * c.min_outline_view
+           and -c.outline_flat < (ascent := run.measures.get("ascent", -1.0)) and c.outline_flat > 0 else [])
     if not why:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "

@@ -319,6 +319,14 @@ def test_outline_flags_outlines_apart_a_coarse_optimum_left_and_an_object_cut_by
         assert ask(reg.check_outline, run, np.zeros(3)) == flags
         assert run.measures["outline_view"] == pytest.approx(128 / (256 + 20))
     assert for_dimension(RegisterParams(), 3).check.min_outline_view == 0.45
+    # rows 20-109, cut by the left and right borders: 256 / (256 + 180) = 0.59 of the boundary is outline, above the
+    # 2D limit but under 1.2 times it, so a flat measure one unit from the result refuses it (forty-third round)
+    band = Image(100.0 * ((rows >= 20) & (rows < 110)) + np.random.default_rng(0).normal(0, 2.0, rows.shape))
+    for ascent, limit, flags in ((-0.01, None, ["outline"]), (-0.05, None, []), (-0.01, 0.0, [])):
+        run = make_run(band, band) if limit is None else make_run(band, band, outline_flat=limit)
+        run.measures = {"ascent": ascent}
+        assert ask(reg.check_outline, run, np.zeros(3)) == flags
+        assert run.measures["outline_view"] == pytest.approx(256 / (256 + 180))
 
 
 def test_prominence_separates_the_truth_from_a_typical_transform(pd_run):
