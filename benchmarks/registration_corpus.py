@@ -1050,6 +1050,13 @@ def build_case(spec: CaseSpec) -> Case:
     return Case(spec, fixed, moving, truth)
 
 
+def case_by_id(case_id: str, scale: float = 1.0) -> Case:
+    """The case ``<split>-<d>d-<source>-<index>`` rebuilt from its seeds (a split an attack script adds must be
+    registered first), drawn at ``--cases-scale`` ``scale``."""
+    dim = 2 if "-2d-" in case_id else 3
+    return build_case(next(s for s in plan_split(case_id.split(f"-{dim}d-")[0], dim, scale) if s.id == case_id))
+
+
 def write_image(image: Image, path: Path) -> None:
     """A float32 NIfTI with the image's spacing, origin and direction."""
     import SimpleITK as sitk

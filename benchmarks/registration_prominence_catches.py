@@ -45,20 +45,14 @@ def main() -> None:
     pair_kind_attack.register_split()
     folder, lines = Path(tempfile.mkdtemp(prefix="prominence_catches_")), []
     for case_id, metrics, scale in CASES:
-        parts = case_id.split("-")
-        at = next(i for i, p in enumerate(parts) if p in ("2d", "3d"))
-        split, dim = "-".join(parts[:at]), int(parts[at][0])
-        spec = next(s for s in corpus.plan_split(split, dim, scale) if s.id == case_id)
-        case = corpus.build_case(spec)
-        fixed_path, moving_path, fixed, _ = corpus.write_case(case, folder)
+        case = corpus.case_by_id(case_id, scale)
+        fixed_path, moving_path, fixed, moving = corpus.write_case(case, folder)
         for metric in metrics.split(","):
-            out = topomatch.register(str(fixed_path), str(moving_path), metric=metric)
-            unit = max(fixed.spacing) if dim == 2 else 1.0
-            tre = corpus.mean_tre(out.registration.transform.with_center(fixed.center), case.truth.with_center(fixed.center),
-                                  fixed) / unit
-            lines.append(f"{case_id:30s} {metric}  TRE {tre:6.2f} {'px' if dim == 2 else 'mm'}  "
-                         f"{'ok (silent)' if out.ok else 'flagged'}  {sorted(out.flags)}  prominence "
-                         f"{out.registration.measures.get('prominence', float('nan')):.2f}")
+            result = corpus.run_ours(metric, fixed_path, moving_path, fixed, moving)  # topomatch.register, defaults
+            row = corpus.score(case, fixed, f"ours-{metric}", result)
+            lines.append(f"{case_id:30s} {metric}  TRE {row['tre'] / row['unit']:6.2f} {'px' if case.spec.dim == 2 else 'mm'}  "
+                         f"{'ok (silent)' if result.ok else 'flagged'}  {sorted(result.flags)}  prominence "
+                         f"{result.measures.get('prominence', float('nan')):.2f}")
             print(lines[-1], flush=True)
     if args.out:
         args.out.write_text(f"topomatch {topomatch.__file__}\n" + "\n".join(lines) + "\n")

@@ -44,17 +44,13 @@ def main() -> None:
 
     folder, rows = Path(tempfile.mkdtemp(prefix="spread_seen_")), []
     for case_id, spread in seen_cases(args.below):
-        parts = case_id.split("-")
-        split, dim = parts[0], int(parts[1][0])
-        spec = next(s for s in corpus.plan_split(split, dim) if s.id == case_id)
-        case = corpus.build_case(spec)
-        fixed_path, moving_path, fixed, _ = corpus.write_case(case, folder)
-        out = topomatch.register(str(fixed_path), str(moving_path))
-        unit = max(fixed.spacing) if dim == 2 else 1.0
-        tre = corpus.mean_tre(out.registration.transform.with_center(fixed.center),
-                              case.truth.with_center(fixed.center), fixed) / unit
-        rows.append({"case": case_id, "dim": dim, "kind": spec.kind, "spread": spread, "tre": tre, "ok": out.ok,
-                     "flags": sorted(out.flags), "alpha": out.registration.measures.get("outline_alpha")})
+        case = corpus.case_by_id(case_id)
+        fixed_path, moving_path, fixed, moving = corpus.write_case(case, folder)
+        result = corpus.run_ours("jt", fixed_path, moving_path, fixed, moving)  # topomatch.register, defaults
+        row = corpus.score(case, fixed, "ours-jt", result)
+        rows.append({"case": case_id, "dim": case.spec.dim, "kind": case.spec.kind, "spread": spread,
+                     "tre": row["tre"] / row["unit"], "ok": result.ok, "flags": sorted(result.flags),
+                     "alpha": result.measures.get("outline_alpha")})
         print(json.dumps(rows[-1]), flush=True)
     args.out.write_text(json.dumps({"topomatch": topomatch.__file__, "command": " ".join(sys.argv), "rows": rows},
                                    indent=1) + "\n")

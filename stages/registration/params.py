@@ -46,7 +46,7 @@ class MetricSpec(_Named):
                                                     "pulls it onto the largest bins' band (null: alpha)")
     outline_spread: float = Field(0.12, ge=0, le=1, description="a pair in which either image is less spread inside "
                                   "its solid object than this (structure.interior_spread: a saturated image) is measured "
-                                  "at outline_alpha, the finest level as it is, not flagged (fortieth round; 0: off)")
+                                  "at outline_alpha, not flagged (fortieth round; off at 0, or with check.min_spread 0)")
     discrete_levels: int = Field(16, ge=0, le=1024,
                                  description="a pair in which either image holds at most this many distinct "
                                              "intensities (a label map, a thresholded mask) is measured as an "

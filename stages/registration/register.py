@@ -581,11 +581,11 @@ def check_content(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
-    """The pair is outline-only (``run.outline_only``: a mask, a silhouette) and its outline does not pin the result
-    down: the outlines lie more than ``check.outline_gap`` apart at the result, a coarser level's measure fell from its
-    end to the result by more than ``check.outline_drop``, and on average over other samples (twenty-ninth round), or the
-    grid's border or the other image's view at the result cuts away more of the outline-only image's object than
-    ``check.min_outline_view`` leaves (:func:`~.structure.outline_in_view`). A pair passing all three is accepted."""
+    """An outline-only pair (``run.outline_only``: a mask, a silhouette) whose outline does not pin the result down: the
+    outlines lie over ``check.outline_gap`` apart, a coarser level's measure fell from its end to the result by over
+    ``check.outline_drop`` (and on other samples: 29th round), less than ``check.min_outline_view`` of the object's
+    boundary is outline both images see (:func:`~.structure.outline_in_view`), or under 1.2 times it and the measure one
+    unit away within ``check.outline_flat`` of the result (``ascent``, :func:`check_gain`). Else it is accepted."""
     c = run.params.check
     if not run.outline_only:
         return []
@@ -600,7 +600,7 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
     if role is not None:
         run.measures["outline_view"] = view
     gap = run.measures["outline_gap"] = outline_gap(run.fixed, run.moving, at)
-    drop = run.measures.get("consistency", 0.0)  # absent: every level ended within a quarter of its spacing
+    drop, ascent = run.measures.get("consistency", 0.0), run.measures.get("ascent", -1.0)  # absent: levels agree; no gain test
     if drop > c.outline_drop:  # a drop whose mean over other samples of the levels is not positive is the sample's
         run.measures["outline_drop"] = float(np.mean([max((d for _, d in run.drops(theta, run.params.seed + 7919 * k)),
                                                           default=0.0) for k in range(2, 2 + DROP_SAMPLES)]))
@@ -613,8 +613,8 @@ def check_outline(run: _Run, theta, value, stop) -> list[Flag]:
           ([f"only {view:.0%} of the {role} image's object boundary is outline that both images see, the rest is cut "
             f"by a grid's border (min_outline_view {c.min_outline_view:.0%})"] if view < c.min_outline_view else []) + \
           ([f"the measure one unit from it is within {-ascent:.1%} of it, with {view:.0%} of the outline in view "
-            f"(outline_flat {c.outline_flat:.0%}): nothing pins the result to a unit"] if view < 1.2 * c.min_outline_view
-           and -c.outline_flat < (ascent := run.measures.get("ascent", -1.0)) and c.outline_flat > 0 else [])
+            f"(outline_flat {c.outline_flat:.0%}): nothing pins the result to a unit"]
+           if c.outline_flat > 0 and view < 1.2 * c.min_outline_view and ascent > -c.outline_flat else [])
     if not why:
         return []
     return [Flag("outline", f"{'; '.join(flat)}: a mask or silhouette, and {' and '.join(why)}; check the overlay, "
