@@ -170,6 +170,10 @@ def set_options(out: dict[str, dict[str, Any]], items: Sequence[str], models: Ma
                 parent = default
             raise ConfigError(f"--set {key.strip()}: no such parameter (those of {parent}: "
                               f"{', '.join(known)})") from None
-        value = _validated(info, load_yaml(text), f"--set {key.strip()}")
+        try:
+            given = load_yaml(text)
+        except ConfigError as exc:  # the YAML's own message, named by the option that gave it
+            raise ConfigError(f"--set {key.strip()}: {exc}") from None
+        value = _validated(info, given, f"--set {key.strip()}")
         set_path(out, path, value, f"--set {key.strip()}")
     return out

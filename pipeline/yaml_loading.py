@@ -114,8 +114,10 @@ def load_yaml(text: str) -> Any:
             return None
         _check_size(node)
         return loader.construct_document(node)
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"not valid YAML: {exc}") from None
+    except yaml.YAMLError as exc:  # one line: the problem and where (PyYAML's own text spans several)
+        mark = getattr(exc, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        raise ConfigError(f"not valid YAML: {getattr(exc, 'problem', None) or exc}{where}") from None
     except RecursionError:
         raise ConfigError(f"nested too deeply to parse (more than {MAX_DEPTH} levels are refused)") from None
     finally:

@@ -257,7 +257,9 @@ def test_cli_set_reaches_any_parameter_and_names_the_wrong_ones(capsys, itk_dir)
     for item, words in [("check.min_structur=0", "those of register.check: search"),
                         ("check.min_residual=-1", "greater than or equal to 0"),
                         ("load_pair.fixed_slice=x", "valid integer"),
-                        ("nothing", "expected param=value")]:
+                        ("nothing", "expected param=value"),
+                        ("check.min_flatness=[1,2", "--set check.min_flatness: not valid YAML: expected ',' or ']', "
+                                                    "but got '<stream end>' (line 1, column 5)\n")]:
         code, out, err = register_cli(capsys, pd, shifted, "--set", item)
         assert code == 2 and words in err and out == ""
 
@@ -270,7 +272,10 @@ def test_a_file_that_cannot_be_written_loses_no_result(capsys, itk_dir, tmp_path
     code, stdout, err = register_cli(capsys, itk_dir / "BrainProtonDensitySlice.png",
                                      itk_dir / "BrainProtonDensitySliceR10X13Y17.png", "--out", out, "--json")
     assert code == 1 and "transform.tfm: is a folder, not a file" in err
-    assert json.loads(stdout)["angles"][0] == pytest.approx(10.0, abs=0.1)
+    result = json.loads(stdout)  # the JSON says what was not written, so a script reading it knows why the exit is 1
+    assert result["angles"][0] == pytest.approx(10.0, abs=0.1) and result["ok"]
+    assert "transform.tfm: is a folder, not a file" in result["unwritten"]
+    check(result, "register")
     assert {p.name for p in out.iterdir()} == {"moving_resampled.png", "moving_resampled.tif", "overlay.png",
                                                "registration.json", "transform.tfm"}
 

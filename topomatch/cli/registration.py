@@ -90,9 +90,13 @@ def cmd_register(args: argparse.Namespace) -> int:
         try:
             summary["files"] = write_registration_files(outcome, args.out)
         except (OSError, InputError) as exc:  # printed after the result: a failed write loses nothing computed
+            from topomatch.cli import describe_os_error
+
             unwritten = exc
+            summary["unwritten"] = str(exc) if isinstance(exc, InputError) else describe_os_error(exc)
     keys = (("tx", "ty", "angle") if outcome.dimension == 2 else ("angles", "translation")) + (
-        "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok", "reason", "method", "files")
+        "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok", "reason", "method", "files",
+        "unwritten")
     print_result(summary, as_json=args.json, keys=keys)
     reg = outcome.registration
     info(f"  register: {reg.seconds:.2f} s, {reg.iterations} iterations, {reg.evaluations} evaluations", level=1)
