@@ -268,6 +268,16 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   before any run of it, the design of ``final43``, fresh seeds 82xxx; run once with the merged code.
 - ``final45``: declared (2026-12-07, tenth session) before any run of it, with no change to the registration since
   ``final44``: the design of ``final43``, fresh seeds 83xxx; run once with the release (9851fd6).
+- ``final46``: declared (2026-12-07, tenth session) with the forty-fourth round (2D: a moving image that its mirror
+  image fits better is refused, ``check.mirror``: the x-mirrored pair's two best coarse-search transforms refined at
+  the first level, the better one above the result's first-level value by over 5 %), before either tree ran on it: the
+  design of ``final43``, fresh seeds 84xxx. Its 2D cases decide the round, JT and MI, release against round: (i)
+  flipped (``registration_mirror_attack.py --splits final46 --dims 2``, JT: each moving image flipped along each array
+  axis), the silent passes on asymmetric flips (a section's rows; a sagittal section's columns) fall by at least half;
+  (ii) unflipped (this script, ``--dims 2 --methods ours --metrics jt,mi``), the false flags rise by at most 1 of the 96
+  with each metric and no other row changes (the round only adds a flag). The attack after it: ``kinds-11``
+  (``registration_kind_attack.py``, fresh seeds 85xxx; kinds no threshold was tuned on), 2D, flipped and unflipped,
+  JT: refused if the unflipped false flags rise by more than 2 % of its cases.
 - ``outline3d``: the decision split of the forty-first round (in 3D the outline test's drop, ``check.outline_drop``,
   no longer flags: its 3D flags on the seen report splits were all on correct results or on results other tests
   refused too), declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: 3D only, the
@@ -356,7 +366,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 46)},  # final7 to final45: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 47)},  # final7 to final46: one design, fresh seeds each
     "tight-outline": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight-outline-2": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "outline3d": {3: [("mni", 12), ("mni15", 12), ("kmeans", 12), ("anatomical", 12)]},
@@ -383,7 +393,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 46)},  # final8 to final45
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 47)},  # final8 to final46
          "tight-outline": ("silhouette", "silhouette_resampled"),
          "tight-outline-2": ("silhouette", "silhouette_resampled"),
          "spread": ("saturated", "pd"),
@@ -545,6 +555,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tight-outline", "mni-sagittal", 2): 79502,
          ("tight-outline-2", "mni-axial", 2): 81102, ("tight-outline-2", "mni-coronal", 2): 81402,
          ("tight-outline-2", "mni-sagittal", 2): 81502,
+         ("final46", "mni", 3): 84103, ("final46", "mni15", 3): 84703, ("final46", "kmeans", 3): 84203,
+         ("final46", "anatomical", 3): 84303, ("final46", "mni-axial", 2): 84102, ("final46", "mni-coronal", 2): 84402,
+         ("final46", "mni-sagittal", 2): 84502, ("final46", "itk", 2): 84602,
          ("final45", "mni", 3): 83103, ("final45", "mni15", 3): 83703, ("final45", "kmeans", 3): 83203,
          ("final45", "anatomical", 3): 83303, ("final45", "mni-axial", 2): 83102, ("final45", "mni-coronal", 2): 83402,
          ("final45", "mni-sagittal", 2): 83502, ("final45", "itk", 2): 83602,
@@ -570,7 +583,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12

@@ -38,8 +38,13 @@ def main(argv=None) -> int:
     ap.add_argument("--splits", default="final44,final45")
     ap.add_argument("--dims", default="2,3")
     ap.add_argument("--metric", default="jt")
+    ap.add_argument("--kinds-attack", action="store_true", help="the kind attack's splits and kinds (kinds-11 ...)")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
+    if args.kinds_attack:
+        import registration_kind_attack
+
+        registration_kind_attack.register_split()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for split in args.splits.split(","):
