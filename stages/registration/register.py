@@ -704,7 +704,7 @@ def check_mirror(run: _Run, theta, value, stop) -> list[Flag]:
         return []
     return [Flag("mirror", f"the moving image mirrored left to right fits better: its best coarse transforms, refined, "
                            f"score {ratio:.2f} times the result at the coarsest level (mirror {c.mirror:g}): a flipped "
-                           f"image, which no rigid transform undoes; check the files' orientation and the overlay")]
+                           f"file, which no rigid transform undoes, or a wrong result; check the files' orientation")]
 
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
