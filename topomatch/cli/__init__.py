@@ -23,6 +23,7 @@ import warnings
 from topomatch import __version__
 from topomatch.cli import common, engine, registration, retrieval, skeleton, thesis
 from topomatch.cli.allocator import keep_freed_memory
+from topomatch.cli.common import describe_os_error
 from topomatch.pipeline.errors import TopomatchError
 
 #: The command modules, in --help order; each has ``add_parsers(subparsers)``.
@@ -60,18 +61,6 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     for module in COMMANDS:
         module.add_parsers(sub)
     return parser
-
-
-def describe_os_error(exc: OSError) -> str:
-    """``path: problem`` for a file-system error, in a user's words."""
-    where = exc.filename or ""
-    if isinstance(exc, (FileExistsError, NotADirectoryError)):
-        problem = f"a file is in the way of a folder to write into ({exc.strerror}); choose another path"
-    elif isinstance(exc, PermissionError):
-        problem = "permission denied"
-    else:
-        problem = exc.strerror or str(exc)
-    return f"{where}: {problem}" if where else problem
 
 
 def _command_name(argv: list[str]) -> str:

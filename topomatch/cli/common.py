@@ -104,6 +104,18 @@ def executor_options(args: argparse.Namespace) -> dict[str, Any]:
     return given_options(args, {"executor": ExecutorConfig}, _executor_options()).get("executor", {})
 
 
+def describe_os_error(exc: OSError) -> str:
+    """``path: problem`` for a file-system error, in a user's words."""
+    where = exc.filename or ""
+    if isinstance(exc, (FileExistsError, NotADirectoryError)):
+        problem = f"a file is in the way of a folder to write into ({exc.strerror}); choose another path"
+    elif isinstance(exc, PermissionError):
+        problem = "permission denied"
+    else:
+        problem = exc.strerror or str(exc)
+    return f"{where}: {problem}" if where else problem
+
+
 def path_argument(text: str) -> str:
     """An argparse type for a path option: refuses the empty string (which would silently mean
     'the current folder' or 'no output')."""

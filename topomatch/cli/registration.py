@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import argparse
 
-from topomatch.cli.common import command, info, input_path, path_argument, print_result
+from topomatch.cli.common import command, describe_os_error, info, input_path, path_argument, print_result
 from topomatch.pipeline.cli_options import Option, add_options, add_set_option, given_options, set_options
 from topomatch.pipeline.errors import InputError, TopomatchError
 from topomatch.pipeline.files import check_writable_folder
@@ -90,8 +90,6 @@ def cmd_register(args: argparse.Namespace) -> int:
         try:
             summary["files"] = write_registration_files(outcome, args.out)
         except (OSError, InputError) as exc:  # printed after the result: a failed write loses nothing computed
-            from topomatch.cli import describe_os_error
-
             unwritten = exc
             summary["unwritten"] = str(exc) if isinstance(exc, InputError) else describe_os_error(exc)
     keys = (("tx", "ty", "angle") if outcome.dimension == 2 else ("angles", "translation")) + (
