@@ -150,7 +150,7 @@ class _Level:
 class _Run:
     """One registration in progress: the pyramid, scaling, bounds, random stream, history and level ends."""
 
-    def __init__(self, fixed: Image, moving: Image, params: RegisterParams, mask: np.ndarray | None, callback):
+    def __init__(self, fixed: Image, moving: Image, params: RegisterParams, mask: np.ndarray | None, callback, metric=None):
         self.params, self.callback = params, callback
         self.fixed, self.moving, self.dim = fixed, moving, fixed.dim
         self.k = n_angles(fixed.dim)
@@ -160,7 +160,8 @@ class _Run:
         self.levels_count = self._levels_count()
         self.outline_measure = self.outline_only or self.levels_count is not None
         spread = min((v for k, v in self.structures.items() if k.startswith("spread_")), default=math.inf)
-        self.metric = params.metric.for_outline() if self.outline_measure or spread < params.metric.outline_spread else params.metric
+        self.metric = metric or (params.metric.for_outline() if self.outline_measure or spread < params.metric.outline_spread
+                                 else params.metric)  # metric: given (check_mirror)
         self.levels = self._pyramid()
         self.radius = rms_radius(fixed, mask)
         self.scales = np.r_[[1.0 / self.radius] * self.k, [1.0] * self.dim]
@@ -689,6 +690,23 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
     return flags
 
 
+def check_mirror(run: _Run, theta, value, stop) -> list[Flag]:
+    """The moving image mirrored along x (a 2D search's full circle covers a flip along either axis) fits better: the
+    mirrored pair's two best grid transforms, refined at the first level with the result's measure, beat the result
+    there by over ``check.mirror`` of it (``measures['mirror']``: their ratio): a flip no rigid transform undoes."""
+    if (c := run.params.check).mirror <= 0 or not (here := run.levels[0].objective(theta)) > 0:
+        return []
+    mirror = _Run(run.fixed, run.moving.with_data(run.moving.data[..., ::-1].copy()), run.params, run.mask, None, run.metric)
+    grid = mirror.grid()
+    probes = [grid.thetas[i] for i in np.argsort(-grid.values, kind="stable")[:2] if math.isfinite(grid.values[i])]
+    ratio = run.measures["mirror"] = max((mirror.refine(p)[1] for p in probes), default=-math.inf) / here
+    if ratio <= 1.0 + c.mirror:
+        return []
+    return [Flag("mirror", f"the moving image mirrored left to right fits better: its best coarse transforms, refined, "
+                           f"score {ratio:.2f} times the result at the coarsest level (mirror {c.mirror:g}): a flipped "
+                           f"file, which no rigid transform undoes, or a wrong result; check the files' orientation")]
+
+
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
     """The capture flag if the best of ``probes``, refined at the first level (kept as it is where higher: 38th round),
     beats the result there by ``check.margin`` and, run through the schedule, ends higher (``adopt``: ``run.better``)."""
@@ -728,7 +746,7 @@ def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: b
 CHECKS: tuple[Callable[..., list[Flag]], ...] = (
     check_start, check_overlap, check_bounds, check_chance, check_gain, check_consistency, check_stability,
     check_agreement, check_label, check_overlap_bound, check_content, check_outline, check_prominence, check_flatness,
-    check_capture)
+    check_capture, check_mirror)
 """The self-check, in order; after ``check_overlap`` flags an undefined measure nothing else is asked."""
 
 

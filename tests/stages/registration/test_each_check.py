@@ -380,6 +380,19 @@ def test_capture_keeps_a_probe_whose_first_level_refine_ends_lower(pd_run, monke
 TRUTH3 = np.array([0.10, -0.05, 0.08, 4.0, -3.0, 2.0])  # (three angles in radians, tx, ty, tz)
 
 
+def test_mirror_flags_a_moving_image_flipped_front_to_back_and_not_the_unflipped_one(pd_slice, pd_run):
+    """A flip no rigid transform undoes (44th round; a hostile user's mirrored sagittal slice passed): the moved PD
+    slice mirrored along its rows (front to back: the brain is not symmetric that way) is registered to some pose, and
+    the mirrored pair (the unflipped image) refined from its best coarse transforms beats that pose by far; the
+    unflipped pair at its truth is quiet, its mirror (left-right: nearly the same brain) scoring below it."""
+    assert ask(reg.check_mirror, pd_run, TRUTH) == [] and 0.5 < pd_run.measures["mirror"] < 1.0
+    moving = moved(pd_slice, RigidTransform(tuple(TRUTH), tuple(pd_slice.center)))
+    result = reg.register(pd_slice, moving.with_data(moving.data[::-1].copy()))
+    assert "mirror" in [f.check for f in result.flags] and result.measures["mirror"] > 1.5
+    off = make_run(pd_slice, moving, mirror=0.0)
+    assert ask(reg.check_mirror, off, TRUTH) == [] and "mirror" not in off.measures
+
+
 def ball_image(radius: float = 14.0, n: int = 48, seed: int = 0) -> Image:
     """A ball of 100 on 0 with noise of deviation 2 (n^3 voxels of 1 mm), centred on the grid."""
     zz, yy, xx = np.mgrid[0:n, 0:n, 0:n].astype(float) - (n - 1) / 2
@@ -492,6 +505,7 @@ def test_3d_start_overlap_agreement_prominence_and_capture(t1_run):
     assert ask(reg.check_capture, t1_run, wrong) == ["capture"]
     assert t1_run.better is not None and t1_run.distance(t1_run.better[0], TRUTH3) < 1.0
     t1_run.better = None
+    assert ask(reg.check_mirror, t1_run, TRUTH3) == [] and "mirror" not in t1_run.measures  # off in 3D (3D: 0)
 
 
 def test_3d_outline_gap_of_a_shifted_ball_and_its_flag():
