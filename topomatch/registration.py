@@ -332,6 +332,13 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     save(out / "overlay.png", buf.getvalue())
     history = {k: strict_lists(v) for k, v in reg.history.items()}
     save(out / "registration.json", json.dumps({**outcome.to_dict(), "history": history}, default=str).encode())
+    stale = sorted(set(out.glob("moving_resampled.*")) - set(written))  # an earlier run's, in another format
+    if stale:
+        import warnings
+
+        warnings.warn(f"{out}: {', '.join(p.name for p in stale)} from an earlier run stay beside this run's files (this "
+                      f"run wrote {', '.join(p.name for p in written if p.name.startswith('moving_resampled'))}); remove "
+                      f"them or write to another --out folder", stacklevel=2)
     if failures:
         raise failures[0]
     return [str(p) for p in written]

@@ -281,3 +281,22 @@ def test_the_overlay_draws_large_images_block_averaged_and_small_ones_as_they_ar
     assert fl.shape == ml.shape == (83, 70) and fl.spacing == (3.0, 3.0)  # 250 // 3 rows, 210 // 3 columns
     np.testing.assert_allclose(fl.data[0, 0], large.data[:3, :3].mean())
     np.testing.assert_allclose(fl.physical(np.zeros((1, 2))), [[1.0, 1.0]])  # the first block's centre
+
+
+def test_an_output_folder_reused_for_another_format_warns_of_the_older_files(tmp_path):
+    """A hostile user's pass: --out reused for a run that writes another format kept the earlier run's resampled image
+    beside the new one without a word. Now it warns, naming them (the command does not delete files it did not write);
+    the same format written again replaces its files and says nothing."""
+    import warnings
+
+    pair = (ITK_DIR / "BrainProtonDensitySliceBorder20.png", ITK_DIR / "BrainProtonDensitySliceShifted13x17y.png")
+    outcome = topomatch.register(*pair)
+    topomatch.write_registration_files(outcome, tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        topomatch.write_registration_files(outcome, tmp_path)  # the same files again: no warning
+    in_memory = topomatch.register(topomatch.read_image(pair[0]), topomatch.read_image(pair[1]))  # written as .nii.gz
+    with pytest.warns(UserWarning, match=r"moving_resampled.png, moving_resampled.tif from an earlier run .*this run "
+                                         r"wrote moving_resampled.nii.gz"):
+        topomatch.write_registration_files(in_memory, tmp_path)
+    assert (tmp_path / "moving_resampled.png").exists() and (tmp_path / "moving_resampled.nii.gz").exists()
