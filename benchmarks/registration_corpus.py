@@ -1368,6 +1368,14 @@ def save_json(path: Path, out: dict) -> None:
     tmp.replace(path)
 
 
+def save_study(path: Path | None, doc: str, summary, rows: list) -> None:
+    """A study or attack script's results: its docstring's first line, the command, ``summary`` and ``rows`` (strict
+    JSON: a non-finite number is null) in ``path`` (None: not written)."""
+    if path is not None:
+        finite = json.loads(json.dumps(rows, default=float), parse_constant=lambda c: None)
+        save_json(path, {"about": doc.splitlines()[0], "command": " ".join(sys.argv), "summary": summary, "rows": finite})
+
+
 def _versions() -> dict:
     out = {"python": platform.python_version(), "numpy": np.__version__}
     for module in ("SimpleITK", "itk", "nilearn"):

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import collections
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -67,9 +66,7 @@ def main(argv=None) -> int:
                for d, s, a in sorted({k[:3] for k in counts})}
     for key, value in summary.items():
         print(f"{key:28s} passed {value['passed']:3d}  refused {value['refused']:3d}")
-    if args.json:
-        args.json.write_text(json.dumps({"about": __doc__.splitlines()[0], "command": " ".join(sys.argv),
-                                         "summary": summary, "rows": rows}, indent=1))
+    rc.save_study(args.json, __doc__, summary, rows)
     return 0
 
 

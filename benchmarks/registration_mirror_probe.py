@@ -17,7 +17,6 @@ attack); ``-1`` keeps it. Run::
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
@@ -73,9 +72,7 @@ def main(argv=None) -> int:
                      "ok": bool(registration.ok), "flags": [f.check for f in registration.flags],
                      "coarse": coarse, "fine": fine})
         print(f"{spec.id:34s} {spec.kind:20s} ok {registration.ok!s:5} coarse {coarse:.3f} fine {fine:.3f}", flush=True)
-    if args.json:
-        args.json.write_text(json.dumps({"about": __doc__.splitlines()[0], "command": " ".join(sys.argv), "rows": rows},
-                                        indent=1))
+    rc.save_study(args.json, __doc__, None, rows)
     return 0
 
 

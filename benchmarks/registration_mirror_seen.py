@@ -71,9 +71,7 @@ def main(argv=None) -> int:
                "flags_on_wrong": sum(o["flagged"] and not o["correct"] for o in out),
                "wrong": sum(not o["correct"] for o in out), "silent": sum(not o["correct"] and o["ok"] for o in out)}
     print(json.dumps(summary))
-    if args.json:
-        args.json.write_text(json.dumps({"about": __doc__.splitlines()[0], "command": " ".join(sys.argv),
-                                         "summary": summary, "rows": out}, indent=1))
+    rc.save_study(args.json, __doc__, summary, out)
     return 0
 
 

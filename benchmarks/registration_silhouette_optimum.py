@@ -119,11 +119,8 @@ def main(argv=None) -> int:
             print(f"{r['case']:32s} {r['tre_px']:6.2f} px ok {r['ok']!s:5} rel {r['rel']:+.4f}"
                   + (f" objects rel {r['objects_rel']:+.4f} {r['objects_tre_px']:6.2f} px" if "objects_rel" in r else ""),
                   flush=True)
-    out = {"about": __doc__.splitlines()[0], "command": " ".join(["registration_silhouette_optimum.py", *sys.argv[1:]]),
-           "summary": summary(rows), "rows": rows}
-    print(json.dumps(out["summary"], indent=1))
-    if args.json:
-        args.json.write_text(json.dumps(out, indent=1, default=float))
+    print(json.dumps(summary(rows), indent=1))
+    rc.save_study(args.json, __doc__, summary(rows), rows)
     return 0
 
 
