@@ -38,12 +38,19 @@ def main(argv=None) -> int:
     ap.add_argument("--dims", default="2,3")
     ap.add_argument("--metric", default="jt")
     ap.add_argument("--kinds-attack", action="store_true", help="the kind attack's splits and kinds (kinds-11 ...)")
+    ap.add_argument("--sources-attack", type=Path, metavar="WHEELS", help="the source attack's splits (sources: dipy's, "
+                    "pydicom's and nibabel's data), the dipy and pydicom wheels in the folder WHEELS")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     if args.kinds_attack:
         import registration_kind_attack
 
         registration_kind_attack.register_split()
+    if args.sources_attack:
+        import registration_source_attack
+
+        registration_source_attack.WHEEL_DIR.append(args.sources_attack)
+        registration_source_attack.register_split()
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for split in args.splits.split(","):
