@@ -278,6 +278,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   with each metric and no other row changes (the round only adds a flag). The attack after it: ``kinds-11``
   (``registration_kind_attack.py``, fresh seeds 85xxx; kinds no threshold was tuned on), 2D, flipped and unflipped,
   JT: refused if the unflipped false flags rise by more than 2 % of its cases.
+- ``final47``: declared (2026-12-07, eleventh session) before any run of it, with no change to the registration since
+  the forty-fourth round's merge (the release at df3d03d: ``check.mirror`` on in 2D): the design of ``final43``, fresh
+  seeds 86xxx; run once with that release, nothing chosen on it; its moving images flipped along each array axis too
+  (``registration_mirror_attack.py --splits final47``), the first report of the ``mirror`` test on cases it never saw.
 - ``outline3d``: the decision split of the forty-first round (in 3D the outline test's drop, ``check.outline_drop``,
   no longer flags: its 3D flags on the seen report splits were all on correct results or on results other tests
   refused too), declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: 3D only, the
@@ -366,7 +370,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 47)},  # final7 to final46: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 48)},  # final7 to final47: one design, fresh seeds each
     "tight-outline": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight-outline-2": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "outline3d": {3: [("mni", 12), ("mni15", 12), ("kmeans", 12), ("anatomical", 12)]},
@@ -393,7 +397,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 47)},  # final8 to final46
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 48)},  # final8 to final47
          "tight-outline": ("silhouette", "silhouette_resampled"),
          "tight-outline-2": ("silhouette", "silhouette_resampled"),
          "spread": ("saturated", "pd"),
@@ -555,6 +559,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tight-outline", "mni-sagittal", 2): 79502,
          ("tight-outline-2", "mni-axial", 2): 81102, ("tight-outline-2", "mni-coronal", 2): 81402,
          ("tight-outline-2", "mni-sagittal", 2): 81502,
+         ("final47", "mni", 3): 86103, ("final47", "mni15", 3): 86703, ("final47", "kmeans", 3): 86203,
+         ("final47", "anatomical", 3): 86303, ("final47", "mni-axial", 2): 86102, ("final47", "mni-coronal", 2): 86402,
+         ("final47", "mni-sagittal", 2): 86502, ("final47", "itk", 2): 86602,
          ("final46", "mni", 3): 84103, ("final46", "mni15", 3): 84703, ("final46", "kmeans", 3): 84203,
          ("final46", "anatomical", 3): 84303, ("final46", "mni-axial", 2): 84102, ("final46", "mni-coronal", 2): 84402,
          ("final46", "mni-sagittal", 2): 84502, ("final46", "itk", 2): 84602,
@@ -583,7 +590,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51, "final47": 52}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
