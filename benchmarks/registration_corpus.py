@@ -282,6 +282,18 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   the forty-fourth round's merge (the release at df3d03d: ``check.mirror`` on in 2D): the design of ``final43``, fresh
   seeds 86xxx; run once with that release, nothing chosen on it; its moving images flipped along each array axis too
   (``registration_mirror_attack.py --splits final47``), the first report of the ``mirror`` test on cases it never saw.
+- ``final48``: declared (2026-12-07, eleventh session) with the forty-fifth round (3D: a moving volume that its mirror
+  image fits better is refused: ``check.mirror`` 0.1 with ``check.mirror_refine`` off, the x-mirrored moving image's
+  coarse search, turned by no or half a turn about y or z, against the pair's own; 2D: the mirrored pair's search is
+  prefetched, its values unchanged), before either tree ran on it: 3D only, the design of ``final43`` at
+  ``--cases-scale 2`` (60 cases), fresh seeds 87xxx. Release (df3d03d) against round, JT and MI: (i) flipped
+  (``registration_mirror_attack.py --splits final48 --dims 3 --cases-scale 2``, JT), the silent passes on asymmetric
+  flips (array axes 0 and 1; axis 2 is left-right in every 3D source) fall by at least half; (ii) unflipped (this
+  script, ``--dims 3 --methods ours --metrics jt,mi --cases-scale 2``), the false flags rise by at most 1 of the 60 with
+  each metric and no estimate changes (the round only adds a flag); (iii) 2D: ``final47``'s 2D rows of ours (JT, MI)
+  run again with the round equal the recorded ones (estimate, TRE, flags, measures). The attack after it: ``kinds-12``
+  (``registration_kind_attack.py``, fresh seeds 88xxx), 3D, flipped and unflipped, JT: refused if the unflipped false
+  flags rise by more than 2 % of its cases.
 - ``outline3d``: the decision split of the forty-first round (in 3D the outline test's drop, ``check.outline_drop``,
   no longer flags: its 3D flags on the seen report splits were all on correct results or on results other tests
   refused too), declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: 3D only, the
@@ -370,7 +382,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 48)},  # final7 to final47: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 49)},  # final7 to final48: one design, fresh seeds each
     "tight-outline": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight-outline-2": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "outline3d": {3: [("mni", 12), ("mni15", 12), ("kmeans", 12), ("anatomical", 12)]},
@@ -397,7 +409,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 48)},  # final8 to final47
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 49)},  # final8 to final48
          "tight-outline": ("silhouette", "silhouette_resampled"),
          "tight-outline-2": ("silhouette", "silhouette_resampled"),
          "spread": ("saturated", "pd"),
@@ -559,6 +571,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tight-outline", "mni-sagittal", 2): 79502,
          ("tight-outline-2", "mni-axial", 2): 81102, ("tight-outline-2", "mni-coronal", 2): 81402,
          ("tight-outline-2", "mni-sagittal", 2): 81502,
+         ("final48", "mni", 3): 87103, ("final48", "mni15", 3): 87703, ("final48", "kmeans", 3): 87203,
+         ("final48", "anatomical", 3): 87303, ("final48", "mni-axial", 2): 87102, ("final48", "mni-coronal", 2): 87402,
+         ("final48", "mni-sagittal", 2): 87502, ("final48", "itk", 2): 87602,
          ("final47", "mni", 3): 86103, ("final47", "mni15", 3): 86703, ("final47", "kmeans", 3): 86203,
          ("final47", "anatomical", 3): 86303, ("final47", "mni-axial", 2): 86102, ("final47", "mni-coronal", 2): 86402,
          ("final47", "mni-sagittal", 2): 86502, ("final47", "itk", 2): 86602,
@@ -590,7 +605,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51, "final47": 52}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51, "final47": 52, "final48": 53}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12

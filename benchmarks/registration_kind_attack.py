@@ -48,7 +48,7 @@ SPLIT = "kinds"
 SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000, "kinds-3": 54000, "kinds-4": 57000, "kinds-5": 58000,
                "kinds-6": 59000, "label-kinds": 61000, "kinds-7": 62000,
                "kinds-8": 64000, "kinds-9": 66000, "kinds-10": 68000,
-               "kinds-11": 85000}
+               "kinds-11": 85000, "kinds-12": 88000}
 """The splits and their seeds' base (``kinds-2``: the same design, declared after ``kinds`` had run once, before any
 code changed; run once with the same release; ``kinds-3``: the same design, declared with the thirty-third round,
 which ``kinds`` and ``kinds-2`` motivated, run once with its code; ``kinds-4``: declared on the branch of a
@@ -91,7 +91,10 @@ session) after the merge and before any run, to be run once with the merged rele
 to decide; run once: JT 77/9/25/1, MI 89/5/18/0, elastix 88/24); ``kinds-11``: the same design as ``kinds``, fresh seeds
 85xxx, declared on 2026-12-07 (tenth session) as the attack on the forty-fourth round (the mirror test, 2D), before
 any run: its 2D cases run with ``registration_mirror_attack.py --kinds-attack`` (flipped, JT) and with this script
-(unflipped, ``--dims 2 --metrics jt --methods ours``), each with the release and with the round (corpus.py, ``final46``)."""
+(unflipped, ``--dims 2 --metrics jt --methods ours``), each with the release and with the round (corpus.py, ``final46``);
+``kinds-12``: the same design, fresh seeds 88xxx, declared on 2026-12-07 (eleventh session) as the attack on the
+forty-fifth round (the mirror test in 3D), before any run: its 3D cases run flipped and unflipped, JT, with the release
+and with the round (corpus.py, ``final48``)."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
 SPLIT_KINDS = {"label-kinds": ("posterized", "atlas_bg255")}
 """Splits with kinds of their own: ``posterized`` (a label-like image whose inner boundaries follow the anatomy, where

@@ -37,6 +37,7 @@ def main(argv=None) -> int:
     ap.add_argument("--splits", default="final44,final45")
     ap.add_argument("--dims", default="2,3")
     ap.add_argument("--metric", default="jt")
+    ap.add_argument("--cases-scale", type=float, default=1.0, help="scales every split's case count (as the corpus's)")
     ap.add_argument("--kinds-attack", action="store_true", help="the kind attack's splits and kinds (kinds-11 ...)")
     ap.add_argument("--sources-attack", type=Path, metavar="WHEELS", help="the source attack's splits (sources: dipy's, "
                     "pydicom's and nibabel's data), the dipy and pydicom wheels in the folder WHEELS")
@@ -55,7 +56,7 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for split in args.splits.split(","):
             for dim in (int(d) for d in args.dims.split(",")):
-                for spec in rc.plan_split(split, dim):
+                for spec in rc.plan_split(split, dim, args.cases_scale):
                     case = rc.build_case(spec)
                     for axis in range(dim):
                         try:
