@@ -50,10 +50,8 @@ static void *accumulate(void *arg) {
         if (!(u >= 0.0 && u <= hi_i && v >= 0.0 && v <= hi_j && w >= 0.0 && w <= hi_k))
             continue;
         inside++;
-        Py_ssize_t ii = (Py_ssize_t)u, jj = (Py_ssize_t)v, kk = (Py_ssize_t)w;
-        if (ii > i0max) ii = i0max;
-        if (jj > j0max) jj = j0max;
-        if (kk > k0max) kk = k0max;
+        const Py_ssize_t ii = Py_MIN((Py_ssize_t)u, i0max), jj = Py_MIN((Py_ssize_t)v, j0max),
+                         kk = Py_MIN((Py_ssize_t)w, k0max);
         const double fx = u - ii, fy = v - jj, fz = w - kk;
         const Py_ssize_t base = kk * mi * mj + jj * mi + ii;
         const Py_ssize_t c[8] = {base, base + di, base + dj, base + dj + di,
@@ -78,8 +76,7 @@ static void *accumulate(void *arg) {
             g0[cell0 + (bin < 0 ? 0 : (bin > bmax ? bmax : bin))] += 1.0;
         } else {
             const double val = a0 < 0.0 ? 0.0 : (a0 > (double)bmax ? (double)bmax : a0);
-            long m0 = (long)val;
-            if (m0 > bmax0) m0 = bmax0;
+            const long m0 = Py_MIN((long)val, bmax0);
             const double wt = val - (double)m0;
             g0[cell0 + m0] += 1.0 - wt;
             g1[cell0 + m0 + 1] += wt;
@@ -98,8 +95,7 @@ static PyObject *joint_histogram(PyObject *self, PyObject *args) {
                           &mode, &h0, &h1, &threads))
         return NULL;
     const Py_ssize_t n = fbk.len / (Py_ssize_t)sizeof(int64_t), cells = h0.len / (Py_ssize_t)sizeof(double);
-    if (threads < 1) threads = 1;
-    if (threads > MAX_THREADS) threads = MAX_THREADS;
+    threads = Py_MAX(1, Py_MIN(threads, MAX_THREADS));
     Pass pass[MAX_THREADS];
     double *extra[MAX_THREADS] = {NULL};
     pthread_t id[MAX_THREADS];
@@ -123,13 +119,11 @@ static PyObject *joint_histogram(PyObject *self, PyObject *args) {
         if (started[k]) pthread_join(id[k], NULL);
         else accumulate(&pass[k]);  /* no thread: this pass runs here */
     }
-    for (int k = 0; k < threads; k++) {
+    for (int k = 0; k < threads; k++) {  /* pass 0 accumulates into h0, h1 themselves */
         inside += pass[k].inside;
-        if (k > 0 && extra[k] != NULL) {
-            double *g0 = (double *)h0.buf, *g1 = (double *)h1.buf;
-            for (Py_ssize_t c = 0; c < cells; c++) { g0[c] += extra[k][c]; g1[c] += extra[k][cells + c]; }
-            free(extra[k]);
-        }
+        if (extra[k] == NULL) continue;
+        for (Py_ssize_t c = 0; c < cells; c++) { pass[0].g0[c] += extra[k][c]; pass[0].g1[c] += extra[k][cells + c]; }
+        free(extra[k]);
     }
     Py_END_ALLOW_THREADS
     PyBuffer_Release(&A); PyBuffer_Release(&b); PyBuffer_Release(&P); PyBuffer_Release(&mflat);

@@ -129,8 +129,7 @@ def jensen_renyi_histogram(h: np.ndarray, alpha: float = 2.0, weights: Weights =
 def mutual_information(h: np.ndarray) -> float:
     """``H(X) + H(Y) - H(X, Y)`` of a joint histogram (n, k) (natural log)."""
     h = np.asarray(h, dtype=np.float64)
-    total = h.sum()
-    if total <= 0:
+    if (total := h.sum()) <= 0:
         return float("nan")
     p = h / total
     return float(shannon_entropy(p.sum(axis=1)) + shannon_entropy(p.sum(axis=0)) - shannon_entropy(p.ravel()))
@@ -140,8 +139,7 @@ def tsallis_mutual_information(h: np.ndarray, alpha: float = 2.0, form: Literal[
     """Tsallis mutual information of a joint histogram (n, k); see the module docstring for the forms."""
     _check_alpha(alpha)
     h = np.asarray(h, dtype=np.float64)
-    total = h.sum()
-    if total <= 0:
+    if (total := h.sum()) <= 0:
         return float("nan")
     if abs(alpha - 1.0) < _ONE:
         return mutual_information(h)

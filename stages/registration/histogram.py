@@ -32,8 +32,7 @@ start costs more than it saves)."""
 def histogram_threads() -> int:
     """Threads of the compiled pass: ``$OMP_NUM_THREADS`` when set (the engine's worker processes set it to 1),
     else the CPUs this process may use, at most 4."""
-    env = os.environ.get("OMP_NUM_THREADS", "")
-    if env.isdigit() and int(env) > 0:
+    if (env := os.environ.get("OMP_NUM_THREADS", "")).isdigit() and int(env) > 0:
         return int(env)
     cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     return max(1, min(4, cpus))

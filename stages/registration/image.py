@@ -92,8 +92,7 @@ class Image:
     def centroid(self) -> np.ndarray:
         """Physical intensity centroid of ``data - min(data)`` (ITK's MOMENTS initialiser), shape (d,)."""
         w = self.data - self.data.min()
-        total = w.sum()
-        if total <= 0:
+        if (total := w.sum()) <= 0:
             return self.center
         axes = range(self.dim)
         index = [w.sum(axis=tuple(a for a in axes if a != ax)) @ np.arange(n) for ax, n in enumerate(self.shape)]

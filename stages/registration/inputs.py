@@ -75,8 +75,7 @@ def pairs_csv(spec: PairsCsvConfig, files: InputFiles) -> list[InputUnit]:
     for r, row in enumerate(rows):
         where = f"row {r + 2}"
         wanted = [spec.fixed_column, spec.moving_column, *spec.truth_columns.values()]
-        missing = [c for c in wanted if c not in row]
-        if missing:
+        if missing := [c for c in wanted if c not in row]:
             raise InputError(path, f"{where}: no column {missing[0]!r} (columns: {', '.join(map(str, row))})")
         short = any(row[c] is None for c in wanted)  # DictReader's marks: None values (short), a None key (long)
         if short or None in row:

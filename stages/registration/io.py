@@ -30,8 +30,7 @@ def check_pixels(arr: np.ndarray, path: str | Path | None) -> np.ndarray:
     if np.iscomplexobj(arr):
         raise InputError(path, f"pixels are complex numbers (dtype {arr.dtype}); register their magnitude or one part")
     data = np.ascontiguousarray(arr, dtype=np.float64)
-    bad = ~np.isfinite(data)
-    if bad.any():
+    if (bad := ~np.isfinite(data)).any():
         raise InputError(path, f"{int(bad.sum())} of {data.size} pixels are NaN or infinite; mask or fill them first")
     lo, hi = float(data.min()), float(data.max())
     if max(-lo, hi) > 1e100:  # squared and summed over the pixels (moments, variances): 1e302 gave NaN parameters
@@ -169,8 +168,7 @@ def load_pair(fixed_path: str, moving_path: str, *, params: LoadPairParams) -> L
 
 def read_volume(path: str | Path) -> Image:
     """:func:`read_image` of a file that must be a 3D volume (InputError naming it otherwise)."""
-    image = read_image(path)
-    if image.dim != 3:
+    if (image := read_image(path)).dim != 3:
         raise InputError(path, f"is a {image.dim}D image ({' x '.join(map(str, image.size))}); a 3D registration "
                                f"needs volumes (NIfTI, MetaImage, NRRD, DICOM)")
     return image

@@ -54,8 +54,7 @@ def tissue_contrast(data: np.ndarray, levels) -> np.ndarray:
     25th, 50th, 75th and 99th percentiles and maximum (the background, then CSF ... white matter)."""
     d = np.asarray(data, dtype=np.float64)
     t = otsu_threshold(d)
-    fg = d[d > t]
-    if fg.size == 0:
+    if (fg := d[d > t]).size == 0:
         return d.copy()
     lo = float(d.min())
     q = np.quantile(fg, [0.25, 0.5, 0.75, 0.99])

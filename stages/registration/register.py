@@ -253,12 +253,11 @@ class _Run:
         centres = [t_init] + [initial_translation(self.fixed, self.moving, m) for m in ("moments", "geometry")]
         centres.append(np.zeros(self.dim))
         thetas = [theta0] + [np.r_[zeros, c + off] for c in centres for off in grid]
-        scored = [(value, i, theta) for i, theta in enumerate(thetas) if math.isfinite(value := coarse(theta))]
-        scored.sort(key=lambda x: (-x[0], x[1]))
+        scored = sorted((-value, i) for i, theta in enumerate(thetas) if math.isfinite(value := coarse(theta)))
         if not scored:
             return theta0
         chosen: list[np.ndarray] = []
-        for theta in [np.r_[zeros, c] for c in centres] + [x[2] for x in scored]:
+        for theta in [np.r_[zeros, c] for c in centres] + [thetas[i] for _, i in scored]:
             if len(chosen) >= len(centres) + st.candidates:
                 break
             if math.isfinite(coarse(theta)) and all(np.linalg.norm(theta[self.k:] - other[self.k:]) >= 0.5 * st.spacing
@@ -280,18 +279,17 @@ class _Run:
         o = self.params.optimizer
         objective = self.levels[li].objective if objective is None else objective
         last = o.average_finest if li == len(self.levels) - 1 and not self.outline_measure else o.average_last
+        shared = dict(scales=self.scales, lower=lower, upper=upper, callback=callback)  # the two optimisers' arguments
         if o.name == "spsa":
             settings = SPSASettings(
                 iterations=spec.iterations, a=o.a, A=o.A, c=spec.c, alpha=spec.gain_alpha, gamma=o.gain_gamma,
                 step=spec.step, average=spec.average, max_step=o.max_step, blocking=o.blocking, shrink=o.shrink,
                 tol=o.tol, average_last=min(last, spec.iterations), newton=o.newton, normalize=o.normalize,
                 c_step_ratio=o.c_step_ratio, start=start)
-            return spsa_maximize(objective, theta, settings, rng=self.rng if rng is None else rng, scales=self.scales,
-                                 lower=lower, upper=upper, callback=callback)
+            return spsa_maximize(objective, theta, settings, rng=self.rng if rng is None else rng, **shared)
         settings = PowellSettings(max_evaluations=max(20, 4 * spec.iterations), xtol=0.02 * self.levels[li].spacing,
                                   step=spec.step)
-        return powell_maximize(objective, theta, settings, scales=self.scales, lower=lower, upper=upper,
-                               callback=callback)
+        return powell_maximize(objective, theta, settings, **shared)
 
     def schedule_from(self, theta: np.ndarray, done: int = 0) -> tuple[np.ndarray, str, list[np.ndarray]]:
         """Optimise level by level from ``theta`` (the first level continuing its gains after ``done`` iterations already
@@ -399,8 +397,7 @@ class _Run:
         the search copy's coarse grid can miss a narrow peak that the first level sees from a grid cell away."""
         c, first = self.params.check, self.levels[0].objective
         chosen = self.candidates(theta, c.shortlist)
-        values = [first(t) for t in chosen]
-        order = np.argsort([-v if math.isfinite(v) else math.inf for v in values], kind="stable")
+        order = np.argsort([-first(t) for t in chosen], kind="stable")  # a measure is finite or -inf
         return [chosen[i] for i in order[: c.candidates]]
 
 
@@ -803,8 +800,7 @@ def register(fixed: Image, moving: Image, params: RegisterParams = RegisterParam
         theta, fine = run.ensemble(theta), run.levels[-1].objective
         value = fine(theta)
         flags = self_check(run, theta, value, stop)
-        restarts = int(run.better is not None and params.check.retry)  # the capture check's better end adopted
-        if restarts:
+        if restarts := int(run.better is not None and params.check.retry):  # the capture check's better end adopted
             theta, stop, run.ends = run.better
             value = fine(theta := run.ensemble(theta))
             flags = self_check(run, theta, value, stop)

@@ -84,8 +84,7 @@ def bernoulli_jt_report(experiment, results, params: BernoulliJTParams) -> Repor
 
     g = np.linspace(0, 1, params.points)
     p, q = np.meshgrid(g, g, indexing="ij")
-    P1 = np.stack([p, 1 - p], axis=-1)
-    P2 = np.stack([q, 1 - q], axis=-1)
+    P1, P2 = (np.stack([x, 1 - x], axis=-1) for x in (p, q))
     n = len(params.alphas)
     fig = plt.figure(figsize=(4.6 * n, 8))
     rows = []
@@ -175,9 +174,7 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
     import matplotlib.pyplot as plt
 
     data: dict[str, dict[tuple, dict[str, list[tuple]]]] = {}
-    for r in results:
-        if not r.ok:
-            continue
+    for r in (r for r in results if r.ok):
         for ev in _of_type(r, EvaluateResult):
             t, est = tuple(ev.truth.values()), tuple(ev.truth[n] + ev.errors[n] for n in ev.truth)
             data.setdefault(_label(r), {}).setdefault(tuple(round(v, 6) for v in t), {}).setdefault(
@@ -187,16 +184,14 @@ def registration_bars_report(experiment, results, params: BarsParams) -> ReportO
         cols = len(cases)
         fig, axes = plt.subplots(2, cols, figsize=(4.4 * cols, 6.4), squeeze=False)
         for c, by_method in enumerate(cases.values()):
-            methods = list(by_method)
-            width = 0.8 / max(len(methods), 1)
-            names, truth = by_method[methods[0]][0][:2]
+            width = 0.8 / len(by_method)  # each case has a method
+            names, truth = next(iter(by_method.values()))[0][:2]
             x = np.arange(len(names))
-            for m, method in enumerate(methods):
-                runs = by_method[method]
+            for m, (method, runs) in enumerate(by_method.items()):
                 est = np.array([run[2] for run in runs])                    # (seeds, parameters)
                 errs = np.abs(est - np.array(truth))
                 label = method.split("/")[-1].split("(")[0].upper()
-                at = x + (m - (len(methods) - 1) / 2) * width
+                at = x + (m - (len(by_method) - 1) / 2) * width
                 for row, values in ((0, est), (1, errs)):
                     mid = np.median(values, axis=0)
                     spread = np.array([mid - values.min(axis=0), values.max(axis=0) - mid]) if len(runs) > 1 else None
@@ -250,8 +245,7 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
     for k, (r, res) in enumerate(rows):
         for j, name in enumerate(res.values):
             ax = axes[k][j]
-            for a, alpha in enumerate(res.alphas):
-                v = res.values[name][a]
+            for alpha, v in zip(res.alphas, res.values[name]):
                 scale = np.nanmax(v) if params.normalize == "max" and np.nanmax(v) > 0 else 1.0
                 ax.plot(res.offsets[name] + res.center[j], v / scale, label=f"alpha = {alpha:g}")
                 sharp = float(np.nanmean(v) / np.nanmax(v)) if np.nanmax(v) > 0 else float("nan")
@@ -370,8 +364,7 @@ class OverlayParams(Params):
 @report("registration_overlay", params=OverlayParams)
 def registration_overlay_report(experiment, results, params: OverlayParams) -> ReportOutput:
     """Fixed, moving, checkerboards before/after and a colour overlay after registration, per item."""
-    chosen = registered_items(results, params.method, params.max_items)
-    if not chosen:
+    if not (chosen := registered_items(results, params.method, params.max_items)):
         return ReportOutput(notes=["no registered items to draw"])
     fig = overlay_figure([(r.final("fixed"), r.final("moving"), reg, _label(r)) for r, reg in chosen], top=0.95,
                          bottom=0.05, hspace=0.3)
@@ -422,8 +415,7 @@ def accuracy_rows(evaluations: list[tuple[str, Any]], threshold: float) -> list[
         groups.setdefault(("all", ev.method), []).append(ev)
     rows = []
     for (group, method), evs in sorted(groups.items(), key=lambda kv: (kv[0][0] != "all", kv[0][0], kv[0][1])):
-        tre = np.array([e.tre_mean for e in evs])
-        secs = np.array([e.seconds for e in evs])
+        tre, secs = np.array([(e.tre_mean, e.seconds) for e in evs]).T
         success = tre <= threshold
         flagged = np.array([e.flagged for e in evs])
         rows.append({"pairs": group, "method": method, "cases": len(evs), "success_rate": float(success.mean()),
@@ -446,15 +438,13 @@ def accuracy_summary_report(experiment, results, params: AccuracyParams) -> Repo
     for r in results:
         for ev in _of_type(r, EvaluateResult):
             unique.setdefault((_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values())), (_label(r), ev))
-    evaluations = list(unique.values())
-    if not evaluations:
+    if not (evaluations := list(unique.values())):
         return ReportOutput(notes=["no evaluate results"])
     rows = accuracy_rows(evaluations, params.threshold)
     methods = sorted({ev.method for _, ev in evaluations})
     fig, axes = plt.subplots(1, 2, figsize=(12, 0.6 * len(methods) + 2.4))
     for k, method in enumerate(methods):
-        tre = np.array([ev.tre_mean for _, ev in evaluations if ev.method == method])
-        secs = np.array([ev.seconds for _, ev in evaluations if ev.method == method])
+        tre, secs = np.array([(ev.tre_mean, ev.seconds) for _, ev in evaluations if ev.method == method]).T
         jitter = (np.random.default_rng(k).random(len(tre)) - 0.5) * 0.35
         axes[0].scatter(np.clip(tre, 1e-3, 1e3), k + jitter, s=9, alpha=0.6)
         axes[1].scatter(secs, k + jitter, s=9, alpha=0.6)

@@ -159,8 +159,7 @@ class GridSearch:
         if len(finite) == 0 or not math.isfinite(value):
             return -math.inf
         median = float(np.median(finite))
-        mad = float(np.median(np.abs(finite - median)))
-        if mad <= 0:
+        if (mad := float(np.median(np.abs(finite - median)))) <= 0:
             return math.inf if value > median else 0.0
         return (value - median) / mad
 

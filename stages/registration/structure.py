@@ -172,8 +172,7 @@ def outline_gap(fixed: Image, moving: Image, transform: RigidTransform) -> float
     mapped = resample(moving.with_data(moving_object.astype(np.float64)), transform, fixed, fill=np.nan, flat=near)
     defined = np.isfinite(mapped)
     slope = np.sqrt(sum(g ** 2 for g in np.gradient(fixed_object.astype(np.float64), *fixed.spacing[::-1])))
-    outline = float(slope.ravel()[near][defined].sum())
-    if outline <= 0:
+    if (outline := float(slope.ravel()[near][defined].sum())) <= 0:
         return float("nan")
     between = float(np.abs(fixed_object.ravel()[near][defined] - mapped[defined]).sum())
     return between / outline

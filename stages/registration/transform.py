@@ -169,8 +169,7 @@ class RigidTransform:
         import SimpleITK as sitk
 
         if transform.GetName() == "CompositeTransform":
-            comp = sitk.CompositeTransform(transform)
-            if comp.GetNumberOfTransforms() != 1:
+            if (comp := sitk.CompositeTransform(transform)).GetNumberOfTransforms() != 1:
                 raise ValueError(f"expected one rigid transform, got a composite of {comp.GetNumberOfTransforms()}")
             transform = comp.GetNthTransform(0)
         tr = transform.Downcast() if hasattr(transform, "Downcast") else transform
