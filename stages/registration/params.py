@@ -244,7 +244,9 @@ class CheckSpec(Params):
     retry: bool = Field(True, description="when a probe wins, adopt the result of the schedule run from it and check "
                                           "again (once)")
     mirror: float = Field(0.05, ge=0, allow_inf_nan=False, description="a result that the moving image mirrored beats by "
-                          "this fraction at the coarsest level is flagged: a flipped file (44th round; 0: off; 3D: off)")
+                          "this fraction is flagged: a flipped file (44th round; 3D: 0.1, 45th; 0: off)")
+    mirror_refine: bool = Field(True, description="the mirrored pair's two best coarse transforms refined and compared "
+                                "with the result at the coarsest level; off (3D): the two coarse searches' best scores")
     on_failure: Literal["flag", "error"] = Field("flag", description="flag a failed registration, or raise an error")
 
 
@@ -303,7 +305,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "check": {"grid": 5, "min_content": 0.0, "min_flatness": 0.0, "overlap_bound": False,
                   "chance": 3.0, "consistency": 0.0, "stability": 0.8, "margin": 0.01, "candidates": 2, "refine": 30,
                   "outline_view_partner": False, "outline_prominence": False, "search_region": True,
-                  "min_outline_view": 0.45, "outline_flat": 0.0, "mirror": 0.0},
+                  "min_outline_view": 0.45, "outline_flat": 0.0, "mirror": 0.1, "mirror_refine": False},
     },
 }
 

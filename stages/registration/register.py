@@ -175,7 +175,7 @@ class _Run:
         self.lower, self.upper = (np.r_[[s * a] * self.k, self.start[self.k:] + s * self.max_translation] for s in (-1.0, 1.0))
         self.history: list[dict[str, np.ndarray]] = []
         self.ends: list[np.ndarray] = []
-        self._grid: GridSearch | Future | None = None  # a Future while prefetch()'s search runs
+        self._grids: dict[bool, GridSearch | Future] = {}  # mirrored or not: a Future while prefetch()'s search runs
 
     def _structures(self) -> dict[str, float]:
         """``<test>_fixed`` / ``<test>_moving`` for each outline-only test whose threshold ``check.min_<test>`` is
@@ -349,36 +349,39 @@ class _Run:
         res = self.optimize(0, spec, start, lower=lower, upper=upper, objective=objective)
         return res.theta, objective(res.theta)
 
-    def grid(self) -> GridSearch:
+    def grid(self, mirrored: bool = False) -> GridSearch:
         """The coarse search (:meth:`coarse_search`), once, or the one :meth:`prefetch` started."""
-        if self._grid is None:
-            self._grid = self.coarse_search()
-        elif isinstance(self._grid, Future):
-            self._grid = self._grid.result()
-        return self._grid
+        found = self._grids.get(mirrored) or self.coarse_search(mirrored)
+        self._grids[mirrored] = found = found.result() if isinstance(found, Future) else found
+        return found
 
     def prefetch(self, pool: ThreadPoolExecutor) -> None:
-        """Start in ``pool`` the coarse search (own search copy), which the checks need and the result does not, with a second
-        CPU (not in the engine's workers) and images that overlap at the start (else the checks may stop before asking)."""
-        if self.params.check.search and histogram_threads() > 1 and \
-                self.levels[0].objective.overlap(self.start) >= self.params.metric.min_overlap:
-            self._grid = pool.submit(self.coarse_search)
+        """Start in ``pool`` the coarse search (own search copy) and the mirror test's, which the checks need and the result
+        does not, with a second CPU (not in the engine's workers) and images that overlap at the start (else the checks
+        may stop before asking)."""
+        c = self.params.check
+        if c.search and histogram_threads() > 1 and self.levels[0].objective.overlap(self.start) >= self.params.metric.min_overlap:
+            self._grids[False] = pool.submit(self.coarse_search)
+            if c.mirror > 0:
+                self._grids[True] = pool.submit(self.coarse_search, True)
 
-    def coarse_search(self) -> GridSearch:
+    def coarse_search(self, mirrored: bool = False) -> GridSearch:
         """The coarse exhaustive search on a search copy of its own: 2D ``check.probes`` angles over the full circle, 3D
         no rotation and ``check.angles`` about each axis; x a ``check.grid``^d square of translations over the search
-        box about the centroid-mapping translation of each rotation."""
+        box about the centroid-mapping translation of each rotation. ``mirrored``: of the moving image mirrored along x,
+        in 3D turned by no or half a turn about y or z instead (the flips along x, z and y: :func:`check_mirror`)."""
         c = self.params.check
+        moving = self.moving.with_data(self.moving.data[..., ::-1].copy()) if mirrored else self.moving
         if self.dim == 2:
             rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
             polish = [np.array([s * math.pi / c.probes / 2]) for s in (-1.0, 0.0, 1.0)]  # quarter probe steps
         else:
             rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
-                                                   for a in c.angles])
+                                                   for a in c.angles]) if not mirrored else np.diag([0, math.pi, math.pi])
             polish = [np.zeros(3)]
-        images = SearchImages(self.fixed, self.moving, center=self.center, min_overlap=self.params.metric.min_overlap,
+        images = SearchImages(self.fixed, moving, center=self.center, min_overlap=self.params.metric.min_overlap,
                               region=self.mask if c.search_region else None)
-        return grid_search(images, rotations, lambda angles: initial_translation(self.fixed, self.moving, "moments", angles),
+        return grid_search(images, rotations, lambda angles: initial_translation(self.fixed, moving, "moments", angles),
                            steps=c.grid, half_width=self.max_translation, polish_rotations=polish)
 
     def candidates(self, theta: np.ndarray, n: int | None = None) -> list[np.ndarray]:
@@ -688,20 +691,29 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_mirror(run: _Run, theta, value, stop) -> list[Flag]:
-    """The moving image mirrored along x (a 2D search's full circle covers a flip along either axis) fits better: the
-    mirrored pair's two best grid transforms, refined at the first level with the result's measure, beat the result
-    there by over ``check.mirror`` of it (``measures['mirror']``: their ratio): a flip no rigid transform undoes."""
+    """The moving image mirrored along x fits better (a flip no rigid transform undoes: the 2D search's full circle covers
+    a flip along either axis, the 3D mirrored search's half turns one along any): with ``check.mirror_refine`` (2D), the
+    mirrored pair's two best grid transforms, refined at the first level with the result's measure, beat the result there
+    by over ``check.mirror`` of it; without (3D), the mirrored search's best score beats the pair's own search's best (or
+    its score at the result, if higher) by over ``check.mirror``. ``measures['mirror']``: the ratio."""
     if (c := run.params.check).mirror <= 0 or not (here := run.levels[0].objective(theta)) > 0:
         return []
-    mirror = _Run(run.fixed, run.moving.with_data(run.moving.data[..., ::-1].copy()), run.params, run.mask, None, run.metric)
-    grid = mirror.grid()
-    probes = [grid.thetas[i] for i in np.argsort(-grid.values, kind="stable")[:2] if math.isfinite(grid.values[i])]
-    ratio = run.measures["mirror"] = max((mirror.refine(p)[1] for p in probes), default=-math.inf) / here
-    if ratio <= 1.0 + c.mirror:
+    grid = run.grid(mirrored=True)
+    if c.mirror_refine:
+        mirror = _Run(run.fixed, run.moving.with_data(run.moving.data[..., ::-1].copy()), run.params, run.mask, None, run.metric)
+        probes = [grid.thetas[i] for i in np.argsort(-grid.values, kind="stable")[:2] if math.isfinite(grid.values[i])]
+        ratio = max((mirror.refine(p)[1] for p in probes), default=-math.inf) / here
+    else:
+        best = max(float(np.max((own := run.grid()).values)), own.images.score(theta, min_overlap=0.0))
+        ratio = float(np.max(grid.values)) / best if best > 0 else -math.inf
+    run.measures["mirror"] = ratio
+    if not ratio > 1.0 + c.mirror:
         return []
-    return [Flag("mirror", f"the moving image mirrored left to right fits better: its best coarse transforms, refined, "
-                           f"score {ratio:.2f} times the result at the coarsest level (mirror {c.mirror:g}): a flipped "
-                           f"file, which no rigid transform undoes, or a wrong result; check the files' orientation")]
+    how = ("its best coarse transforms, refined, score {:.2f} times the result at the coarsest level" if c.mirror_refine
+           else "its best transform of a coarse search, turned by up to half a turn, scores {:.2f} times the pair's best")
+    return [Flag("mirror", f"the moving image mirrored left to right fits better: {how.format(ratio)} (mirror "
+                           f"{c.mirror:g}): a flipped file, which no rigid transform undoes, or a wrong result; check the "
+                           f"files' orientation")]
 
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:

@@ -505,7 +505,20 @@ def test_3d_start_overlap_agreement_prominence_and_capture(t1_run):
     assert ask(reg.check_capture, t1_run, wrong) == ["capture"]
     assert t1_run.better is not None and t1_run.distance(t1_run.better[0], TRUTH3) < 1.0
     t1_run.better = None
-    assert ask(reg.check_mirror, t1_run, TRUTH3) == [] and "mirror" not in t1_run.measures  # off in 3D (3D: 0)
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_3d_mirror_flags_a_volume_flipped_along_an_axis_and_not_the_unflipped_one(t1_run, axis):
+    """3D (45th round): the x-mirrored moving volume's coarse search, turned by no or half a turn about y or z (the
+    flips along x, z and y), against the pair's own search. A moved T1 flipped along array axis 0 or 1 scores far
+    above its own best (the search's answer stands in for a registration's); the unflipped pair at its truth is quiet,
+    its mirror scoring below it. The test does not need the refined coarsest level of 2D (``mirror_refine`` off)."""
+    t1_run.measures = {}
+    assert ask(reg.check_mirror, t1_run, TRUTH3) == [] and 0.3 < t1_run.measures["mirror"] < 1.0
+    flipped = make_run(t1_run.fixed, t1_run.moving.with_data(np.flip(t1_run.moving.data, axis).copy()))
+    answer = (grid := flipped.grid()).thetas[np.argmax(grid.values)]
+    assert ask(reg.check_mirror, flipped, answer) == ["mirror"] and flipped.measures["mirror"] > 1.3
+    assert not flipped.params.check.mirror_refine and flipped.params.check.mirror == pytest.approx(0.1)
 
 
 def test_3d_outline_gap_of_a_shifted_ball_and_its_flag():

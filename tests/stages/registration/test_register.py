@@ -112,8 +112,8 @@ def test_same_seed_same_result(pd_slice, small_t1, d):
 
 @pytest.mark.parametrize("d", [2, 3])
 def test_the_prefetched_self_check_work_changes_nothing(pd_slice, small_t1, monkeypatch, d):
-    """With a second CPU the coarse search runs in a thread while the levels run: parameters, flags, measures,
-    history and evaluation counts equal those of the run without it."""
+    """With a second CPU the coarse search (and in 3D the mirror test's) runs in a thread while the levels run:
+    parameters, flags, measures, history and evaluation counts equal those of the run without it."""
     from concurrent.futures import Future
 
     import topomatch.stages.registration.register as module
@@ -122,7 +122,7 @@ def test_the_prefetched_self_check_work_changes_nothing(pd_slice, small_t1, monk
         (0.05, -0.03, 0.08, 3.0, -2.0, 1.5), small_t1.center)))
     started = []
     monkeypatch.setattr(module._Run, "prefetch", lambda run, pool, real=module._Run.prefetch: (
-        real(run, pool), started.append(isinstance(run._grid, Future))))
+        real(run, pool), started.append(all(isinstance(run._grids.get(m), Future) for m in (False, d == 3)))))
     runs = []
     for threads in (2, 1):
         monkeypatch.setattr(module, "histogram_threads", lambda: threads)
@@ -135,7 +135,8 @@ def test_the_prefetched_self_check_work_changes_nothing(pd_slice, small_t1, monk
 
 def test_nothing_is_prefetched_for_images_that_do_not_overlap_at_the_start(small_t1, monkeypatch):
     """The coarse search's canvas spans the gap between the images: for a 4-voxel volume 500 mm away it would take
-    gigabytes, and the self-check stops (no overlap) before it asks for the search; an overlapping pair gets it."""
+    gigabytes, and the self-check stops (no overlap) before it asks for the search; an overlapping pair gets it, and
+    the mirror test's (45th round)."""
     import types
 
     import topomatch.stages.registration.register as module
@@ -146,8 +147,8 @@ def test_nothing_is_prefetched_for_images_that_do_not_overlap_at_the_start(small
         params = for_dimension(RegisterParams(transform={"init": "geometry"}, start={"steps": 0}), 3)
         run = module._Run(small_t1, moving, params, module.sample_mask(small_t1, params), None)
         submitted = []
-        run.prefetch(types.SimpleNamespace(submit=submitted.append))
-        assert submitted == [run.coarse_search] * expected
+        run.prefetch(types.SimpleNamespace(submit=lambda f, *args: submitted.append((f, *args))))
+        assert submitted == [(run.coarse_search,), (run.coarse_search, True)] * expected  # its own and the mirror test's
 
 
 def test_the_result_is_averaged_over_other_samples_of_the_finest_level(pd_slice, monkeypatch):
