@@ -356,9 +356,8 @@ class _Run:
         return found
 
     def prefetch(self, pool: ThreadPoolExecutor) -> None:
-        """Start in ``pool`` the coarse search (own search copy) and the mirror test's, which the checks need and the result
-        does not, with a second CPU (not in the engine's workers) and images that overlap at the start (else the checks
-        may stop before asking)."""
+        """Start in ``pool`` the coarse searches (own search copies; the mirror test's too), which the checks need and the
+        result does not, with a second CPU (not in the engine's workers) and images overlapping at the start."""
         c = self.params.check
         if c.search and histogram_threads() > 1 and self.levels[0].objective.overlap(self.start) >= self.params.metric.min_overlap:
             self._grids[False] = pool.submit(self.coarse_search)
@@ -691,11 +690,10 @@ def check_capture(run: _Run, theta, value, stop) -> list[Flag]:
 
 
 def check_mirror(run: _Run, theta, value, stop) -> list[Flag]:
-    """The moving image mirrored along x fits better (a flip no rigid transform undoes: the 2D search's full circle covers
-    a flip along either axis, the 3D mirrored search's half turns one along any): with ``check.mirror_refine`` (2D), the
-    mirrored pair's two best grid transforms, refined at the first level with the result's measure, beat the result there
-    by over ``check.mirror`` of it; without (3D), the mirrored search's best score beats the pair's own search's best (or
-    its score at the result, if higher) by over ``check.mirror``. ``measures['mirror']``: the ratio."""
+    """The moving image mirrored along x fits better (a flip no rigid transform undoes; 2D: the full circle, 3D: half turns
+    cover a flip along any axis): with ``check.mirror_refine`` (2D) its two best grid transforms, refined at the first
+    level with the result's measure, beat the result there by over ``check.mirror``; without (3D) its search's best score
+    beats the pair's own search's best (or its score at the result) by over that. ``measures['mirror']``: the ratio."""
     if (c := run.params.check).mirror <= 0 or not (here := run.levels[0].objective(theta)) > 0:
         return []
     grid = run.grid(mirrored=True)
@@ -709,11 +707,10 @@ def check_mirror(run: _Run, theta, value, stop) -> list[Flag]:
     run.measures["mirror"] = ratio
     if not ratio > 1.0 + c.mirror:
         return []
-    how = ("its best coarse transforms, refined, score {:.2f} times the result at the coarsest level" if c.mirror_refine
-           else "its best transform of a coarse search, turned by up to half a turn, scores {:.2f} times the pair's best")
-    return [Flag("mirror", f"the moving image mirrored left to right fits better: {how.format(ratio)} (mirror "
-                           f"{c.mirror:g}): a flipped file, which no rigid transform undoes, or a wrong result; check the "
-                           f"files' orientation")]
+    where = "the result at the coarsest level, refined" if c.mirror_refine else "the pair's own best in a coarse search"
+    return [Flag("mirror", f"the moving image mirrored left to right fits better: it scores {ratio:.2f} times {where} "
+                           f"(mirror {c.mirror:g}): a flipped file, which no rigid transform undoes, or a wrong result; "
+                           f"check the files' orientation")]
 
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
