@@ -294,6 +294,17 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
   run again with the round equal the recorded ones (estimate, TRE, flags, measures). The attack after it: ``kinds-12``
   (``registration_kind_attack.py``, fresh seeds 88xxx), 3D, flipped and unflipped, JT: refused if the unflipped false
   flags rise by more than 2 % of its cases.
+- ``final49``: declared (2026-12-07, eleventh session) with the forty-sixth round (3D: the mirror test's half turns
+  about the moving image's own grid axes, not the physical y and z, so that a flip along a tilted grid axis is covered;
+  after the forty-fifth round's sources attack left an oblique ``aniso`` volume flipped along a grid axis 36 degrees
+  off the physical one silent, mirror ratio 1.00, 1.45 with the grid's axes), before either tree ran on it: 3D only,
+  the design of ``final43``, fresh seeds 89xxx, with ``oblique-2`` (``registration_oblique_attack.py``, 60 3D cases,
+  fresh seeds 90xxx). Release (the forty-fifth round merged) against round. Merged if: (i) ``oblique-2`` flipped
+  (``registration_mirror_attack.py --oblique-attack --splits oblique-2 --dims 3 --cases-scale 2``, JT), the silent
+  passes on flips along an axis with a physical x component below 0.7 (not left-right) fall by at least half; (ii)
+  unflipped, ``oblique-2`` (``--cases-scale 2``) and ``final49`` (``--dims 3 --methods ours --metrics jt,mi``), the
+  false flags rise by at most 1 with each metric on each and no estimate changes; (iii) ``final49`` flipped (JT), the
+  silent passes on flips not left-right do not rise.
 - ``outline3d``: the decision split of the forty-first round (in 3D the outline test's drop, ``check.outline_drop``,
   no longer flags: its 3D flags on the seen report splits were all on correct results or on results other tests
   refused too), declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: 3D only, the
@@ -382,7 +393,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 49)},  # final7 to final48: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 50)},  # final7 to final49: one design, fresh seeds each
     "tight-outline": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight-outline-2": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "outline3d": {3: [("mni", 12), ("mni15", 12), ("kmeans", 12), ("anatomical", 12)]},
@@ -409,7 +420,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 49)},  # final8 to final48
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 50)},  # final8 to final49
          "tight-outline": ("silhouette", "silhouette_resampled"),
          "tight-outline-2": ("silhouette", "silhouette_resampled"),
          "spread": ("saturated", "pd"),
@@ -571,6 +582,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tight-outline", "mni-sagittal", 2): 79502,
          ("tight-outline-2", "mni-axial", 2): 81102, ("tight-outline-2", "mni-coronal", 2): 81402,
          ("tight-outline-2", "mni-sagittal", 2): 81502,
+         ("final49", "mni", 3): 89103, ("final49", "mni15", 3): 89703, ("final49", "kmeans", 3): 89203,
+         ("final49", "anatomical", 3): 89303, ("final49", "mni-axial", 2): 89102, ("final49", "mni-coronal", 2): 89402,
+         ("final49", "mni-sagittal", 2): 89502, ("final49", "itk", 2): 89602,
          ("final48", "mni", 3): 87103, ("final48", "mni15", 3): 87703, ("final48", "kmeans", 3): 87203,
          ("final48", "anatomical", 3): 87303, ("final48", "mni-axial", 2): 87102, ("final48", "mni-coronal", 2): 87402,
          ("final48", "mni-sagittal", 2): 87502, ("final48", "itk", 2): 87602,
@@ -605,7 +619,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51, "final47": 52, "final48": 53}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51, "final47": 52, "final48": 53, "final49": 54}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12

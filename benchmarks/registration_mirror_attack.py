@@ -6,7 +6,8 @@ A hostile user's pass (tenth session) found a mid-sagittal ITK slice mirrored fr
 Here every case of the given report splits (seen: nothing is chosen on them) is registered once per array axis with
 its moving image flipped along it, about the grid's centre, geometry kept. Every answer is wrong by construction; a
 pass is silent unless the anatomy is symmetric about that axis (a brain's left-right axis: the flipped image is then
-nearly the same image, and no intensity measure can tell). Rows: case, source, kind, axis, ok, flags. Run::
+nearly the same image, and no intensity measure can tell). Rows: case, source, kind, axis, ok, flags, and the flipped
+axis's physical x component (``x_component``: 1 for a left-right axis, 0 across it; oblique grids between). Run::
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_mirror_attack.py --splits final44,final45 \\
         --dims 2,3 --json benchmarks/results/registration_mirror_attack.json
@@ -39,6 +40,7 @@ def main(argv=None) -> int:
     ap.add_argument("--metric", default="jt")
     ap.add_argument("--cases-scale", type=float, default=1.0, help="scales every split's case count (as the corpus's)")
     ap.add_argument("--kinds-attack", action="store_true", help="the kind attack's splits and kinds (kinds-11 ...)")
+    ap.add_argument("--oblique-attack", action="store_true", help="the oblique attack's splits (oblique-2 ...)")
     ap.add_argument("--sources-attack", type=Path, metavar="WHEELS", help="the source attack's splits (sources: dipy's, "
                     "pydicom's and nibabel's data), the dipy and pydicom wheels in the folder WHEELS")
     ap.add_argument("--json", type=Path)
@@ -47,6 +49,10 @@ def main(argv=None) -> int:
         import registration_kind_attack
 
         registration_kind_attack.register_split()
+    if args.oblique_attack:
+        import registration_oblique_attack
+
+        registration_oblique_attack.register_split()
     if args.sources_attack:
         import registration_source_attack
 
@@ -65,9 +71,10 @@ def main(argv=None) -> int:
                             print(f"{spec.id} axis {axis}: {exc}", flush=True)
                             continue
                         result = rc.run_ours(args.metric, fixed_path, moving_path, fixed, moving)
+                        along = np.asarray(case.moving.direction)[:, dim - 1 - axis]  # the flipped axis, physical
                         rows.append({"case": spec.id, "split": split, "dim": dim, "source": spec.source,
                                      "kind": spec.kind, "axis": axis, "ok": result.ok, "flags": result.flags,
-                                     "error": result.error})
+                                     "error": result.error, "x_component": float(abs(along[0]))})
                         print(f"{spec.id:34s} {spec.kind:20s} axis {axis} ok {result.ok!s:5} {result.flags}", flush=True)
     counts = collections.Counter((r["dim"], r["source"], r["axis"], "passed" if r["ok"] else "refused") for r in rows)
     summary = {f"{d}D {s} axis {a}": {"passed": counts[(d, s, a, "passed")], "refused": counts[(d, s, a, "refused")]}
