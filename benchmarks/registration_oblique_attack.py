@@ -40,6 +40,9 @@ Splits:
   on it: its decision split with ``final49`` (``registration_corpus.py``), 3D at ``--cases-scale 2`` (60 cases), JT and
   MI unflipped, JT flipped (``registration_mirror_attack.py --oblique-attack --splits oblique-2``); the rule is written
   there, under ``final49``.
+- ``oblique-3`` (seeds 91xxx), declared (2026-12-07, eleventh session) with the forty-seventh round before either tree
+  ran on it: its decision split, 3D at ``--cases-scale 2`` (60 cases); the rule is written in ``registration_corpus.py``
+  under ``final49``.
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_oblique_attack.py --split oblique \\
         --dims 3 --cases-scale 4 --json benchmarks/results/registration_oblique_attack_3d.json
@@ -59,7 +62,7 @@ import registration_corpus as corpus  # noqa: E402  (the corpus's sources, draws
 from topomatch.stages.registration.image import Image  # noqa: E402
 
 SPLIT = "oblique"
-SPLIT_SEEDS = {"oblique-dev": 73000, "oblique": 74000, "oblique-2": 90000}
+SPLIT_SEEDS = {"oblique-dev": 73000, "oblique": 74000, "oblique-2": 90000, "oblique-3": 91000}
 OFFSETS = {("mni", 3): 103, ("mni15", 3): 503, ("kmeans", 3): 203, ("anatomical", 3): 303,
            ("mni-axial", 2): 102, ("mni-coronal", 2): 402, ("mni-sagittal", 2): 502, ("itk", 2): 602}
 ANGLES = (15.0, 45.0)
