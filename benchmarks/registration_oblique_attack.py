@@ -40,9 +40,8 @@ Splits:
   on it: its decision split with ``final49`` (``registration_corpus.py``), 3D at ``--cases-scale 2`` (60 cases), JT and
   MI unflipped, JT flipped (``registration_mirror_attack.py --oblique-attack --splits oblique-2``); the rule is written
   there, under ``final49``.
-- ``oblique-3`` (seeds 91xxx), declared (2026-12-07, eleventh session) with the forty-seventh round before either tree
-  ran on it: its decision split, 3D at ``--cases-scale 2`` (60 cases); the rule is written in ``registration_corpus.py``
-  under ``final49``.
+- ``oblique-3`` (seeds 91xxx), declared (2026-12-07, eleventh session) with a forty-seventh round that was withdrawn
+  before any run (``registration_corpus.py``, under ``final49``): never run.
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_oblique_attack.py --split oblique \\
         --dims 3 --cases-scale 4 --json benchmarks/results/registration_oblique_attack_3d.json
