@@ -27,7 +27,7 @@ from topomatch.stages.registration.search import GridSearch, SearchImages, flatn
 from topomatch.stages.optimize.spsa import OptimizeResult, SPSASettings, spsa_maximize
 from topomatch.stages.registration.structure import (distinct_levels, interior_spread, interior_structure, once_per_image,
                                                      outline_gap, outline_in_view, plateau_share, two_class_residual)
-from topomatch.stages.registration.transform import RigidTransform, euler_matrix, n_angles
+from topomatch.stages.registration.transform import RigidTransform, euler_angles, euler_matrix, n_angles
 
 MIN_LEVEL_VOXELS = 8
 """Fewest pixels along any axis of a pyramid level; a coarser level shrinks that axis less."""
@@ -368,16 +368,16 @@ class _Run:
         """The coarse exhaustive search on a search copy of its own: 2D ``check.probes`` angles over the full circle, 3D
         no rotation and ``check.angles`` about each axis; x a ``check.grid``^d square of translations over the search
         box about the centroid-mapping translation of each rotation. ``mirrored``: of the moving image mirrored along x,
-        in 3D turned by no or half a turn about y or z instead (the flips along x, z and y: :func:`check_mirror`)."""
+        in 3D turned by no or half a turn about one of its grid's axes instead (a flip along any: :func:`check_mirror`)."""
         c = self.params.check
         moving = self.moving.with_data(self.moving.data[..., ::-1].copy()) if mirrored else self.moving
         if self.dim == 2:
             rotations = np.radians(np.linspace(-180.0, 180.0, c.probes, endpoint=False))[:, None]
             polish = [np.array([s * math.pi / c.probes / 2]) for s in (-1.0, 0.0, 1.0)]  # quarter probe steps
         else:
-            rotations = np.vstack([np.zeros(3)] + [np.eye(3)[axis] * math.radians(a) for axis in range(3)
-                                                   for a in c.angles]) if not mirrored else np.diag([0, math.pi, math.pi])
-            polish = [np.zeros(3)]
+            turns = [np.eye(3)[axis] * math.radians(a) for axis in range(3) for a in c.angles] if not mirrored else [
+                euler_angles(2 * np.outer(u, u) - np.eye(3)) for u in self.moving.direction.T]  # half turns: any flip
+            rotations, polish = np.vstack([np.zeros(3)] + turns), [np.zeros(3)]
         images = SearchImages(self.fixed, moving, center=self.center, min_overlap=self.params.metric.min_overlap,
                               region=self.mask if c.search_region else None)
         return grid_search(images, rotations, lambda angles: initial_translation(self.fixed, moving, "moments", angles),

@@ -20,7 +20,7 @@ from topomatch.stages.registration.image import Image
 from topomatch.stages.registration.misalign import moved
 from topomatch.stages.registration.params import RegisterParams, for_dimension
 from topomatch.stages.registration.structure import object_mask
-from topomatch.stages.registration.transform import RigidTransform
+from topomatch.stages.registration.transform import RigidTransform, euler_matrix
 
 TRUTH = np.array([math.radians(8.0), 6.0, -4.0])  # (angle in radians, tx, ty): the run's parameters
 
@@ -519,6 +519,18 @@ def test_3d_mirror_flags_a_volume_flipped_along_an_axis_and_not_the_unflipped_on
     answer = (grid := flipped.grid()).thetas[np.argmax(grid.values)]
     assert ask(reg.check_mirror, flipped, answer) == ["mirror"] and flipped.measures["mirror"] > 1.3
     assert not flipped.params.check.mirror_refine and flipped.params.check.mirror == pytest.approx(0.1)
+
+
+def test_3d_mirrored_search_turns_half_about_the_moving_grids_own_axes(t1_run):
+    """46th round: on a moving grid tilted 36 degrees about x (an oblique acquisition), the mirrored search's rotations
+    are no turn and the half turns 2 u u^T - I about each of the moving grid's axes u (with the mirror along the
+    grid's x: the flips along its z and y, and all three), not about the physical axes."""
+    fixed = t1_run.fixed
+    tilted = Image(fixed.data, fixed.spacing, fixed.origin, euler_matrix([math.radians(36.0), 0.0, 0.0]) @ fixed.direction)
+    grid = make_run(fixed, tilted).coarse_search(mirrored=True)
+    turns = {tuple(np.round(euler_matrix(t[:3]), 9).ravel()) for t in grid.thetas[: grid.n_coarse]}
+    half = [np.eye(3)] + [2.0 * np.outer(u, u) - np.eye(3) for u in tilted.direction.T]
+    assert turns == {tuple(np.round(m, 9).ravel()) for m in half} and len(turns) == 4
 
 
 def test_3d_outline_gap_of_a_shifted_ball_and_its_flag():
