@@ -708,9 +708,9 @@ def check_mirror(run: _Run, theta, value, stop) -> list[Flag]:
     if not ratio > 1.0 + c.mirror:
         return []
     where = "the result at the coarsest level, refined" if c.mirror_refine else "the pair's own best in a coarse search"
-    return [Flag("mirror", f"the moving image mirrored left to right fits better: it scores {ratio:.2f} times {where} "
-                           f"(mirror {c.mirror:g}): a flipped file, which no rigid transform undoes, or a wrong result; "
-                           f"check the files' orientation")]
+    return [Flag("mirror", f"the moving image mirrored (flipped along an axis) fits better: it scores {ratio:.2f} times "
+                           f"{where} (mirror {c.mirror:g}): a file flipped along some axis, which no rigid transform "
+                           f"undoes, or a wrong result; check the files' orientation")]
 
 
 def _better_basin(run: _Run, theta, value, probes: list[np.ndarray], *, adopt: bool) -> list[Flag]:
