@@ -328,7 +328,7 @@ def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
             ax.imshow(img, cmap="gray" if img.ndim == 2 else None, interpolation="nearest", aspect=asp)
             ax.set_title(f"{label}, {what}" if label else what, fontsize=8)
             ax.set_axis_off()
-    flag = "" if registration.ok else "  FLAGGED: " + registration.reason[:100]
+    flag = "" if registration.ok else f"  FLAGGED ({registration.summary()['flags']}): {registration.reason[:100]}"
     axes[0][0].figure.text(0, -0.18 if len(axes) == 1 else 1.25, f"{title}  {registration.method}: "  # over every panel
                            f"{describe(registration.transform)} ({registration.seconds:.2f} s){flag}",
                            transform=axes[0][0].transAxes, fontsize=8, color="#b00" if flag else "k")
