@@ -43,6 +43,13 @@ misalignment of as many pixels as the corpus draws), 3D correct within the facto
 Declared with the twenty-seventh round (a large field registered in working units) before the round's code ran on
 anything but the hostile user's PD pair, and run once before and once after it.
 
+``--split sources-2`` (seeds 93xxx, drawn by no other script): a source found in the twelfth session, after every
+round: ``mpl-mri``, the MRI section matplotlib ships as sample data (``s1045.ima.gz``, 256 x 256 big-endian 16-bit, a
+sagittal head with scalp, face and neck, cut by the grid's lower border; no spacing is stored: 1 mm taken), read
+from the installed matplotlib (nothing copied), 44 cases (four per kind), every case a different draw of the one
+section. Declared before any of its results was seen and run once with the release of 2026-12-07 (3cd93da): an
+attack, nothing is chosen on it.
+
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_source_attack.py --dims 2 \\
         --json benchmarks/results/registration_source_attack_2d.json
 """
@@ -88,6 +95,9 @@ LARGE_SPLIT = "large-fov"
 LARGE_SOURCES = {2: [("itk-macro", 10), ("mni-macro", 10)], 3: [("anatomical-macro", 12), ("kmeans-macro", 12)]}
 LARGE_SEEDS = {("itk-macro", 2): 42612, ("mni-macro", 2): 42622, ("anatomical-macro", 3): 42303,
                ("kmeans-macro", 3): 42203}
+SOURCES_2_SPLIT = "sources-2"
+SOURCES_2 = {2: [("mpl-mri", 44)], 3: []}
+SOURCES_2_SEEDS = {("mpl-mri", 2): 93102}
 MICRO = {"itk-micro": 0.1, "mni-micro": 0.25, "anatomical-micro": 0.25, "kmeans-micro": 0.1,
          "itk-macro": 20.0, "mni-macro": 5.0, "anatomical-macro": 8.0, "kmeans-macro": 20.0}
 """The factor each relabelled source's spacing and origin are multiplied by (``-macro``: the large-fov split's)."""
@@ -168,6 +178,11 @@ def section(source: str, index: int) -> Image:
         return Image(data, (1.0, 1.0), None, None, source)
     if source in ("mr-small", "ct-small"):
         return read_image(member_file(*FILES[source]))
+    if source == "mpl-mri":
+        from matplotlib.cbook import get_sample_data
+        with get_sample_data("s1045.ima.gz") as raw:
+            data = np.frombuffer(raw.read(), ">u2").reshape(256, 256).astype(np.float64)
+        return Image(data, (1.0, 1.0), None, None, source)
     if source in MICRO:
         return micro_fields(source, index).grid
     vol = volume(source)
@@ -180,12 +195,15 @@ def register_split() -> None:
     """Add the split and its sources to the corpus module (this process only)."""
     if SPLIT in corpus.SPLITS:
         return
-    corpus.SPLITS.update({SPLIT: SOURCES, SMALL_SPLIT: SMALL_SOURCES, LARGE_SPLIT: LARGE_SOURCES})
-    corpus.KINDS.update({SPLIT: corpus.ELEVEN_KINDS, SMALL_SPLIT: corpus.ELEVEN_KINDS, LARGE_SPLIT: corpus.ELEVEN_KINDS})
+    corpus.SPLITS.update({SPLIT: SOURCES, SMALL_SPLIT: SMALL_SOURCES, LARGE_SPLIT: LARGE_SOURCES,
+                          SOURCES_2_SPLIT: SOURCES_2})
+    corpus.KINDS.update({split: corpus.ELEVEN_KINDS for split in (SPLIT, SMALL_SPLIT, LARGE_SPLIT, SOURCES_2_SPLIT)})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
     corpus.SEEDS.update({(SMALL_SPLIT, source, dim): seed for (source, dim), seed in SMALL_SEEDS.items()})
     corpus.SEEDS.update({(LARGE_SPLIT, source, dim): seed for (source, dim), seed in LARGE_SEEDS.items()})
-    corpus.SPLIT_ORDER.update({SPLIT: max(corpus.SPLIT_ORDER.values()) + 100, SMALL_SPLIT: 1e9, LARGE_SPLIT: 2e9})
+    corpus.SEEDS.update({(SOURCES_2_SPLIT, source, dim): seed for (source, dim), seed in SOURCES_2_SEEDS.items()})
+    corpus.SPLIT_ORDER.update({SPLIT: max(corpus.SPLIT_ORDER.values()) + 100, SMALL_SPLIT: 1e9, LARGE_SPLIT: 2e9,
+                               SOURCES_2_SPLIT: 3e9})
     fields, score = corpus.source_fields, corpus.score
 
     def scored(case: corpus.Case, fixed: Image, method: str, result: corpus.Result) -> dict:
@@ -195,7 +213,7 @@ def register_split() -> None:
     corpus.score = scored
 
     def source_fields(spec: corpus.CaseSpec) -> corpus.Fields:
-        if spec.split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT):
+        if spec.split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT, SOURCES_2_SPLIT):
             return fields(spec)
         if spec.source in MICRO:
             return micro_fields(spec.source, spec.index if spec.dim == 2 else 0)
@@ -208,7 +226,7 @@ def register_split() -> None:
 
     def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
         spec = plan(split, source, dim, index, place)
-        if split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT):
+        if split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT, SOURCES_2_SPLIT):
             return spec
         grid = volume(source) if dim == 3 else section(source, index)
         extent = float(min(np.asarray(grid.size) * np.asarray(grid.spacing)))
