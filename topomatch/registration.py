@@ -265,10 +265,12 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
     (``moving_resampled`` + ``.png`` 8-bit, or 16-bit for a 16-bit moving image, for Pillow formats, with a float32 ``.tif`` beside it; the file's own
     format with the fixed geometry and the moving pixel type for NIfTI / MetaImage / NRRD; ``.nii.gz`` for
     DICOM or in-memory images), ``transform.tfm`` (SimpleITK's Euler2D / Euler3D transform of the result:
-    ``sitk.ReadTransform`` reads it, ``sitk.Resample(moving, fixed, T)`` gives the resampling),
+    ``sitk.ReadTransform`` reads it, ``sitk.Resample(moving, fixed, T, sitk.sitkLinear, moving_minimum)`` gives the
+    resampling: outside the moving field of view the moving image's minimum, not SimpleITK's default 0),
     ``overlay.png`` (fixed, moving, checkerboards before / after, colour overlay; three orthogonal planes for a
     volume; at most :data:`OVERLAY_PIXELS` an axis) and ``registration.json`` (the JSON fields and the optimiser's history); returns their paths. A file that
-    cannot be written does not stop the others: the first such OSError is raised once all were tried."""
+    cannot be written does not stop the others: the first such OSError is raised once all were tried, its
+    ``written`` attribute listing the paths that were."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -340,5 +342,6 @@ def write_registration_files(outcome: RegistrationOutcome, out: str | Path) -> l
                       f"run wrote {', '.join(p.name for p in written if p.name.startswith('moving_resampled'))}); remove "
                       f"them or write to another --out folder", stacklevel=2)
     if failures:
+        failures[0].written = [str(p) for p in written]  # what the caller can still list (the CLI's ``files``)
         raise failures[0]
     return [str(p) for p in written]

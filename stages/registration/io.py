@@ -64,11 +64,11 @@ def read_image(path: str | Path, *, slice_index: int | None = None, axis: int = 
         origin, direction = (0.0, 0.0), np.eye(2)
         source = f"slice {slice_index % n} (axis {axis}) of {path}"
     elif arr.ndim == 2 and slice_index is not None and strict_slice:
-        raise InputError(path, f"is a 2D image ({arr.shape[0]} x {arr.shape[1]} pixels): a slice ({slice_index}) "
+        raise InputError(path, f"is a 2D image ({arr.shape[0]} rows x {arr.shape[1]} columns): a slice ({slice_index}) "
                                f"applies only to a 3D volume; leave the slice out")
     if arr.ndim not in (2, 3):
-        raise InputError(path, f"is a {arr.ndim}D image of shape {arr.shape}: only 2D images and 3D volumes can be "
-                               f"registered")
+        raise InputError(path, f"is a {arr.ndim}D image of shape {arr.shape}" + (" once its axes of one pixel are dropped: "
+                         "too small to register" if arr.ndim < 2 else ": only 2D images and 3D volumes can be registered"))
     return Image(check_pixels(arr, path), spacing, origin, direction, file_stem(path), source)
 
 

@@ -404,7 +404,7 @@ def registration_table_report(experiment, results, params: RegistrationTablePara
 
 class AccuracyParams(Params):
     name: str = Field("accuracy", **_NAME)
-    threshold: float = Field(1.0, gt=0, description="success: mean TRE at most this (pixels)")
+    threshold: float = Field(1.0, gt=0, description="success: mean TRE at most this (px; mm for a volume)")
 
 
 def accuracy_rows(evaluations: list[tuple[str, Any]], threshold: float) -> list[dict[str, Any]]:
@@ -431,13 +431,13 @@ def accuracy_rows(evaluations: list[tuple[str, Any]], threshold: float) -> list[
 @report("accuracy_summary", params=AccuracyParams)
 def accuracy_summary_report(experiment, results, params: AccuracyParams) -> ReportOutput:
     """Success rate (mean TRE <= threshold), median TRE and time per method, per input pair and overall.
-    A registration repeated across sweep points of a later stage (same pair, method and truth) counts once."""
+    A registration repeated across sweep points of a later stage (same pair, method, truth and estimate) counts once."""
     import matplotlib.pyplot as plt
 
     unique: dict[tuple, tuple[str, Any]] = {}
-    for r in results:
-        for ev in _of_type(r, EvaluateResult):
-            unique.setdefault((_label(r), ev.method, tuple(round(v, 9) for v in ev.truth.values())), (_label(r), ev))
+    for r, ev in ((r, ev) for r in results for ev in _of_type(r, EvaluateResult)):
+        key = (*ev.truth.values(), *ev.errors.values())  # another contrast of one input: another estimate
+        unique.setdefault((_label(r), ev.method, *(round(v, 9) for v in key)), (_label(r), ev))
     if not (evaluations := list(unique.values())):
         return ReportOutput(notes=["no evaluate results"])
     rows = accuracy_rows(evaluations, params.threshold)

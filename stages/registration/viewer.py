@@ -115,7 +115,7 @@ def registration_viewer_report(experiment, results, params: SliceViewerParams) -
     for r, reg in registered_items(results, params.method, params.max_items):
         fixed = r.final("fixed")
         before, after = before_after(fixed, r.final("moving"), reg.transform)
-        title = f"{r.input_label or r.item_id}: {reg.method}, {describe(reg.transform)}"
+        title = f"{r.item_id}: {reg.method}, {describe(reg.transform)}"  # the item: its input and sweep point
         fragments.append(slice_viewer(fixed.data, before, after, fixed.spacing[::-1], title,
                                       f"{params.name}-{len(fragments)}"))
     if not fragments:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -275,6 +276,8 @@ def test_a_file_that_cannot_be_written_loses_no_result(capsys, itk_dir, tmp_path
     result = json.loads(stdout)  # the JSON says what was not written, so a script reading it knows why the exit is 1
     assert result["angles"][0] == pytest.approx(10.0, abs=0.1) and result["ok"]
     assert "transform.tfm: is a folder, not a file" in result["unwritten"]
+    assert {Path(p).name for p in result["files"]} == {"moving_resampled.png", "moving_resampled.tif", "overlay.png",
+                                                       "registration.json"}  # what was written, the folder left out
     check(result, "register")
     assert {p.name for p in out.iterdir()} == {"moving_resampled.png", "moving_resampled.tif", "overlay.png",
                                                "registration.json", "transform.tfm"}

@@ -91,6 +91,7 @@ def cmd_register(args: argparse.Namespace) -> int:
             summary["files"] = write_registration_files(outcome, args.out)
         except (OSError, InputError) as exc:  # printed after the result: a failed write loses nothing computed
             unwritten = exc
+            summary["files"] = getattr(exc, "written", [])  # the files that were written
             summary["unwritten"] = str(exc) if isinstance(exc, InputError) else describe_os_error(exc)
     keys = (("tx", "ty", "angle") if outcome.dimension == 2 else ("angles", "translation")) + (
         "center", "matrix", "objective", "overlap", "iterations", "seconds", "ok", "reason", "method", "files",

@@ -230,6 +230,25 @@ def test_accuracy_rows_count_by_hand():
     assert row["median_seconds"] == 2.0 and row["mean_seconds"] == pytest.approx(7 / 3)
 
 
+def test_accuracy_summary_counts_a_repeat_once_and_two_contrasts_of_one_input_twice():
+    """Two contrasts of one input (a sweep over ``misalign.contrast``: the same truth, other estimates) are two cases;
+    one registration reached again at another sweep point of a later stage (the same estimate) is one."""
+    from types import SimpleNamespace
+
+    from topomatch.stages.registration.evaluate import EvaluateResult
+    from topomatch.stages.registration.reports import AccuracyParams, accuracy_summary_report
+
+    def item(error: float):
+        ev = EvaluateResult(method="m", errors={"angle": error, "tx": 0.0, "ty": 0.0}, d_rotation=abs(error),
+                            d_translation=0.0, tre_mean=abs(error), tre_max=abs(error), success=True, flagged=False,
+                            seconds=1.0, truth={"angle": 5.0, "tx": 1.0, "ty": 2.0})
+        return SimpleNamespace(input_label="{bundled}/a.png", input_path="a.png", results={"evaluate": ev})
+
+    out = accuracy_summary_report(None, [item(0.1), item(0.3), item(0.1)], AccuracyParams())
+    (row,) = [r for r in out.tables["accuracy"] if r["pairs"] == "all"]
+    assert row["cases"] == 2 and row["median_tre"] == pytest.approx(0.2)
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_before_after_resamples_by_the_identity_then_the_transform(d):
     from topomatch.stages.registration.reports import before_after

@@ -240,6 +240,10 @@ def test_bad_volumes_raise_input_errors_naming_the_file(tmp_path):
              tmp_path / "four.nii.gz")
     with pytest.raises(InputError, match=r"four.nii.gz: is a 4D image \(6 x 6 x 6 x 3: 3 volumes"):
         read_volume(tmp_path / "four.nii.gz")
+    nib.save(nib.Nifti1Image(np.full((1, 1, 1), 7, dtype=np.int16), np.eye(4)), tmp_path / "one.nii")
+    with pytest.raises(InputError, match=r"one.nii: is a 0D image of shape \(\) once its axes of one pixel are dropped: "
+                                         r"too small to register"):
+        read_volume(tmp_path / "one.nii")
     nib.save(nib.Nifti1Image(np.full((6, 6, 6), 7, dtype=np.int16), np.eye(4)), tmp_path / "flat.nii")
     with pytest.raises(InputError, match=r"flat.nii: image is constant"):
         read_volume(tmp_path / "flat.nii")
