@@ -267,19 +267,18 @@ def landscape_plot_report(experiment, results, params: LandscapePlotParams) -> R
 # --------------------------------------------------------------------------- overlays
 
 
-def checkerboard(a: np.ndarray, b: np.ndarray, tiles: int = 8) -> np.ndarray:
-    """Alternate square tiles of two images of the same shape (each in its :func:`display_window`)."""
-    s = max(1, min(a.shape) // tiles)
-    rows, cols = np.indices(a.shape)
-    mask = ((rows // s) + (cols // s)) % 2 == 0
-    return np.where(mask, windowed(a, *display_window(a)), windowed(b, *display_window(b)))
+def checkerboard(a: np.ndarray, b: np.ndarray, tiles: int = 8, windows=None) -> np.ndarray:
+    """Alternate square tiles of two images of the same shape, each in its window (``windows``: a's and b's, default
+    each one's :func:`display_window`)."""
+    rows, cols = np.indices(a.shape) // max(1, min(a.shape) // tiles)
+    wa, wb = windows or (display_window(a), display_window(b))
+    return np.where((rows + cols) % 2 == 0, windowed(a, *wa), windowed(b, *wb))
 
 
 def display_window(values: np.ndarray) -> tuple[float, float]:
     """The intensities drawn black and white in every registration figure and the viewer: the 0.5th and 99.5th
     percentiles of ``values`` (a few bright outliers, scalp fat or a vessel, do not darken the rest)."""
-    lo, hi = np.percentile(values, (0.5, 99.5))
-    return float(lo), float(hi)
+    return tuple(float(v) for v in np.percentile(values, (0.5, 99.5)))  # type: ignore[return-value]
 
 
 def windowed(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -288,9 +287,9 @@ def windowed(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return np.clip((x - lo) / (hi - lo if hi > lo else 1.0), 0.0, 1.0)
 
 
-def overlay_rgb(fixed: np.ndarray, moving: np.ndarray) -> np.ndarray:
-    """Fixed in magenta, moving in green: grey where they agree."""
-    f, m = (windowed(x, *display_window(x)) for x in (fixed, moving))
+def overlay_rgb(fixed: np.ndarray, moving: np.ndarray, windows=None) -> np.ndarray:
+    """Fixed in magenta, moving in green, each in its window (as :func:`checkerboard`): grey where they agree."""
+    f, m = (windowed(x, *w) for x, w in zip((fixed, moving), windows or map(display_window, (fixed, moving))))
     return np.stack([f, m, f], axis=-1)
 
 
@@ -315,17 +314,18 @@ def before_after(fixed, moving, transform, flat: np.ndarray | None = None) -> tu
 
 
 def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
-    """Per view of :func:`planes`, a row of five panels on ``axes`` (rows x 5): fixed, moving, checkerboards
-    before and after, colour overlay after."""
+    """Per view of :func:`planes`, five panels on ``axes`` (rows x 5): fixed, moving, checkerboards before and after, colour
+    overlay after; each image in the :func:`display_window` of all its pixels (a plane's own would tint aligned ones)."""
+    windows = display_window(fixed.data), display_window(moving.data)
     for row, ((label, flat, aspect), (_, own, own_aspect)) in enumerate(zip(planes(fixed), planes(moving))):
         f = fixed.data.ravel()[flat]
         before, after = before_after(fixed, moving, registration.transform, flat)
-        panels = [(f, "fixed", aspect), (moving.data.ravel()[own], "moving", own_aspect),
-                  (checkerboard(f, before), "checkerboard before", aspect),
-                  (checkerboard(f, after), "checkerboard after", aspect),
-                  (overlay_rgb(f, after), "after: fixed magenta, moving green", aspect)]
+        panels = [(windowed(f, *windows[0]), "fixed", aspect), (windowed(moving.data.ravel()[own], *windows[1]), "moving",
+                   own_aspect), (checkerboard(f, before, windows=windows), "checkerboard before", aspect),
+                  (checkerboard(f, after, windows=windows), "checkerboard after", aspect),
+                  (overlay_rgb(f, after, windows), "after: fixed magenta, moving green", aspect)]
         for ax, (img, what, asp) in zip(axes[row], panels):
-            ax.imshow(img, cmap="gray" if img.ndim == 2 else None, interpolation="nearest", aspect=asp)
+            ax.imshow(img, cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=1, interpolation="nearest", aspect=asp)
             ax.set_title(f"{label}, {what}" if label else what, fontsize=8)
             ax.set_axis_off()
     flag = "" if registration.ok else f"  FLAGGED ({registration.summary()['flags']}): {registration.reason[:100]}"

@@ -100,3 +100,35 @@ def test_overlay_windows_each_image_like_the_viewer():
     middle = overlay_rgb(bright, ramp)[50, 0]
     assert middle[0] == pytest.approx(0.5, abs=0.01) and middle[1] == pytest.approx(0.5, abs=0.01)
     assert overlay_rgb(bright, ramp).min() == 0.0 and overlay_rgb(bright, ramp).max() == 1.0
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_an_aligned_overlay_is_grey_where_the_fields_overlap(d):
+    """``draw_overlay`` windows each image over all its pixels, not over each drawn plane: a moving image that is the
+    fixed one shifted by whole pixels, registered by that shift, draws grey (R = G) wherever both fields of view reach,
+    in every plane, although the resampled plane holds the moving minimum where its field of view ends (with a plane's
+    own percentiles that fill moved the window and tinted the aligned overlay green)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from topomatch.stages.registration.image import Image
+    from topomatch.stages.registration.register import Registration
+    from topomatch.stages.registration.reports import draw_overlay
+    from topomatch.stages.registration.transform import RigidTransform
+
+    data = np.random.default_rng(d).normal(size=(24, 26, 22)[:d]) - 3.0  # negative values: the fill is not 0
+    fixed = Image(data)
+    shift = 5  # whole pixels along the last axis (x), wrapped: fixed(p) = moving(p + 5 x) for the first n - 5 columns
+    moving = Image(np.roll(data, shift, axis=-1))  # the same intensities: the same window as the fixed image's
+    transform = RigidTransform((0.0,) * (3 * d - 3 - d) + (float(shift),) + (0.0,) * (d - 1), tuple(fixed.center))
+    reg = Registration(transform=transform, value=0.0, flags=(), method="m", seconds=0.0, iterations=0, evaluations=0,
+                       stop_reason="")
+    fig, axes = plt.subplots(1 if d == 2 else 3, 5, squeeze=False)
+    draw_overlay(axes, fixed, moving, reg)
+    for row in axes:
+        rgb = row[4].get_images()[0].get_array()
+        inside = rgb[:, : -shift - 1]  # columns whose moved point is in the field (slice i: its columns are y, all in)
+        assert np.allclose(inside[..., 0], inside[..., 1], atol=1e-9)
+    plt.close(fig)
