@@ -25,7 +25,7 @@ import numpy as np
 
 from topomatch.pipeline.cli_options import Option
 from topomatch.pipeline.config import chain_with
-from topomatch.pipeline.mappings import set_path
+from topomatch.pipeline.mappings import deep_merge, set_path
 from topomatch.pipeline.errors import InputError, StageError
 from topomatch.pipeline.files import atomic_write_bytes
 from topomatch.pipeline.item import run_stages
@@ -96,7 +96,8 @@ class RegistrationOutcome:
                "angles": [json_number(a) for a in t.angles_deg], "translation": [json_number(v) for v in t.translation],
                "center": [json_number(c) for c in t.center],
                "matrix": [[json_number(v, 12) for v in row] for row in t.matrix()],
-               "metric": self.metric, "alpha": reg.measures.get("outline_alpha", self.alpha), "method": reg.method,
+               "metric": self.metric, "method": reg.method,  # MI is Shannon's: order 1
+               "alpha": 1.0 if self.metric == "mi" else reg.measures.get("outline_alpha", self.alpha),
                "objective": json_number(reg.value, 12), "iterations": reg.iterations, "evaluations": reg.evaluations,
                "overlap": round(reg.overlap, 4), "seconds": round(reg.seconds, 4), "ok": reg.ok, "reason": reg.reason,
                "flags": [f.check for f in reg.flags],
@@ -147,8 +148,8 @@ def read_image(path: str | Path, *, slice: int | None = None) -> Image:
 
 def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: str | None = None,
              alpha: float | None = None, weights: str | None = None, optimizer: str | None = None,
-             seed: int | None = None, fixed_slice: int | None = None,
-             moving_slice: int | None = None) -> RegistrationOutcome:
+             seed: int | None = None, fixed_slice: int | None = None, moving_slice: int | None = None,
+             params: dict[str, Any] | None = None) -> RegistrationOutcome:
     """Register ``moving`` to ``fixed`` (rigid): two 2D images or two 3D volumes, as files or :class:`Image` s.
 
     Parameters
@@ -166,6 +167,9 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
         Seed of SPSA and of the sample subsets (the same seed gives the same result).
     fixed_slice, moving_slice : int, optional
         Files only: register this 2D slice of a 3D volume.
+    params : dict, optional
+        Any other parameter of the registration, nested as ``topomatch stages --json`` lists them, e.g.
+        ``{"check": {"min_flatness": 0.2}, "sampling": {"margin": 8}}``: the command line's ``--set check.min_flatness=0.2``.
 
     Returns
     -------
@@ -187,6 +191,8 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
     for keyword, value in given.items():
         if value is not None:
             set_path(overrides, REGISTER_OPTIONS[keyword].path, value, keyword)
+    if params:
+        overrides["register"] = deep_merge(params, overrides.get("register", {}))  # a keyword above wins
     return register_with(fixed, moving, overrides)
 
 

@@ -106,6 +106,21 @@ def test_register_images_in_memory_equals_the_command(capsys):
     assert api.ok and api.tx == pytest.approx(13, abs=0.1) and api.ty == pytest.approx(17, abs=0.1)
 
 
+def test_register_params_are_the_commands_set(capsys):
+    """``params`` reaches every parameter as ``--set`` does: the same result, the threshold recorded where the reason
+    quotes it; and MI reports its order, 1."""
+    fixed_path, moving_path = ITK_DIR / "BrainT1Slice.png", ITK_DIR / "BrainProtonDensitySliceR10X13Y17.png"
+    api = topomatch.register(fixed_path, moving_path, metric="mi", params={"check": {"min_prominence": 1e6}})
+    code = main(["register", str(fixed_path), str(moving_path), "--metric", "mi", "--set", "check.min_prominence=1e6",
+                 "--json"])
+    cli = json.loads(capsys.readouterr().out)
+    assert code == 1  # flagged by the threshold set either way
+    assert api.to_dict()["parameters"] == cli["parameters"] and not api.ok and "prominence" in api.to_dict()["flags"]
+    assert api.to_dict()["alpha"] == cli["alpha"] == 1.0
+    with pytest.raises(topomatch.ConfigError, match="bogus"):
+        topomatch.register(fixed_path, moving_path, params={"check": {"bogus": 1}})
+
+
 def test_run_config_finds_installed_configs(tmp_path, monkeypatch):
     from topomatch.experiments import find_config
 
