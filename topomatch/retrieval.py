@@ -163,7 +163,15 @@ def usable_rows(rows: list[Row], method: str, db: str | Path) -> list[Row]:
 
 
 def _options(method: Method, options: dict[str, Any] | None) -> MatchOptions:
-    return method.match_options(**(options or {}))
+    """The method's matching options with ``options`` over them (ConfigError naming every bad one, as the CLI's)."""
+    from pydantic import ValidationError
+
+    from topomatch.pipeline.params import format_validation_error
+
+    try:
+        return method.match_options(**(options or {}))
+    except ValidationError as exc:
+        raise ConfigError(format_validation_error(exc, "options")) from None
 
 
 # --------------------------------------------------------------------------- match
@@ -214,11 +222,11 @@ def match(a: str | Path, b: str | Path, *, method: str = DEFAULT_PAIR_METHOD,
     if m.kind == "fusion":
         raise ConfigError(f"match: {method} is a fused method whose scales and re-ranking come from a collection; "
                           f"index the meshes and query them, or match with one of its parts ({', '.join(m.parts)})")
+    o = _options(m, options) if m.kind == "endpoints" else None  # a bad option before any descriptor is computed
     da, _ = compute_descriptor(a, method)
     db, _ = compute_descriptor(b, method)
-    if m.kind != "endpoints":
+    if o is None:
         return MatchResult(str(a), str(b), method, float(dissimilarities(da, [db], m)[0]))
-    o = _options(m, options)
     r = match_features(da.data, db.data, correspondence=o.correspondence, dissimilarity=o.dissimilarity,
                        unmatched_cost=o.unmatched_cost)
     pairs = [{"a": int(i), "b": int(j), "cost": float(c), "features_a": da.data[i].tolist(),

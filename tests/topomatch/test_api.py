@@ -180,6 +180,14 @@ def test_retrieval_defaults_are_the_catalogue_best():
     assert inspect.signature(match).parameters["method"].default == DEFAULT_PAIR_METHOD
 
 
+def test_bad_match_options_are_config_errors_naming_them():
+    """The API's ``options`` are checked as the CLI's: a ConfigError naming each bad one, before any mesh is read."""
+    for options, words in (({"unmatched_cost": -1}, "options.unmatched_cost: Input should be greater than or equal to 0"),
+                           ({"bogus": 1}, "options.bogus: unknown key")):
+        with pytest.raises(topomatch.ConfigError, match=words):
+            topomatch.match("no_such_a.off", "no_such_b.off", method="srg", options=options)
+
+
 def test_unmatched_cost_default_is_the_methods_own():
     from topomatch.stages.retrieval.catalogue import METHODS
 

@@ -253,6 +253,12 @@ def test_labels_belong_to_files_and_unmatched_label_rows_are_reported(collection
     code, out, err = run(capsys, "index", collection, "--db", db, "--method", "d2", "--labels", labels,
                          "--workers", "1", "--no-progress")
     assert code == 0 and "1 labelled path is no mesh file of this run" in err and "missing.off" in err
+    code, _, err = run(capsys, "index", collection, "--db", db, "--method", "d2", "--labels", labels, "--workers", "1",
+                       "--no-progress", "-q")
+    assert code == 0 and err == ""  # -q: no warnings (without it the second run warns again: below)
+    code, _, err = run(capsys, "index", collection, "--db", db, "--method", "d2", "--labels", labels, "--workers", "1",
+                       "--no-progress")
+    assert "1 labelled path is no mesh file of this run" in err
     # a second method indexed without --labels takes the files' labels
     code, _, _ = run(capsys, "index", collection, "--db", db, "--method", "sh", "--workers", "1", "--no-progress")
     code, out, _ = run(capsys, "evaluate", "--db", db, "--method", "sh", "--json", "--out", tmp_path / "S.npz")

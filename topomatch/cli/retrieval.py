@@ -185,8 +185,8 @@ def cmd_index(args: argparse.Namespace) -> int:
             print(f"{report.removed} rows of files no longer in the indexed folders were removed")
         if report.unmatched_labels:
             n = len(report.unmatched_labels)
-            print(f"{args.labels}: {n} labelled {'paths are' if n > 1 else 'path is'} no mesh file of this run "
-                  f"(misspelt, missing or not given): {_some(report.unmatched_labels)}", file=sys.stderr)
+            warn(f"{args.labels}: {n} labelled {'paths are' if n > 1 else 'path is'} no mesh file of this run "
+                 f"(misspelt, missing or not given): {_some(report.unmatched_labels)}")  # not with -q
         if report.open_meshes:
             n = len(report.open_meshes)
             print(f"{n} {'meshes are' if n > 1 else 'mesh is'} open (with boundaries; {_some(report.open_meshes)}): "
