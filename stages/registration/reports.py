@@ -4,7 +4,7 @@ their accuracy per method."""
 
 from __future__ import annotations
 
-import math
+import textwrap
 from pathlib import Path
 from typing import Any, Literal
 
@@ -62,7 +62,7 @@ def bernoulli_entropy_report(experiment, results, params: BernoulliEntropyParams
         h = tsallis_entropy(P, alpha, axis=1)
         ax.plot(p, h, label=f"alpha = {alpha:g}" + (" (Shannon)" if alpha == 1 else ""))
         rows.append({"alpha": alpha, "max": float(h.max()), "argmax_p": float(p[np.argmax(h)]),
-                     "max_exact": float((2 ** (1 - alpha) - 1) / (1 - alpha)) if alpha != 1 else math.log(2)})
+                     "max_exact": float((2 ** (1 - alpha) - 1) / (1 - alpha)) if alpha != 1 else float(np.log(2))})
     ax.set(xlabel="p", ylabel="H_alpha(p, 1 - p)")
     ax.set_title("Tsallis entropy of a Bernoulli distribution (thesis Fig. 2.2)", fontsize=9)
     ax.legend(fontsize=7)
@@ -328,10 +328,10 @@ def draw_overlay(axes, fixed, moving, registration, title: str = "") -> None:
             ax.imshow(img, cmap="gray" if img.ndim == 2 else None, vmin=0, vmax=1, interpolation="nearest", aspect=asp)
             ax.set_title(f"{label}, {what}" if label else what, fontsize=8)
             ax.set_axis_off()
-    flag = "" if registration.ok else f"  FLAGGED ({registration.summary()['flags']}): {registration.reason[:100]}"
-    axes[0][0].figure.text(0, -0.18 if len(axes) == 1 else 1.25, f"{title}  {registration.method}: "  # over every panel
-                           f"{describe(registration.transform)} ({registration.seconds:.2f} s){flag}",
-                           transform=axes[0][0].transAxes, fontsize=8, color="#b00" if flag else "k")
+    flag = "" if registration.ok else f"  FLAGGED ({registration.summary()['flags']}): {registration.reason}"
+    text = f"{title}  {registration.method}: {describe(registration.transform)} ({registration.seconds:.2f} s){flag}"
+    axes[0][0].figure.text(0, -0.18 if len(axes) == 1 else 1.25, textwrap.fill(text, 250), fontsize=8,  # every panel
+                           transform=axes[0][0].transAxes, color="#b00" if flag else "k", va="top" if len(axes) == 1 else "bottom")
 
 
 def overlay_figure(pairs, **margins):

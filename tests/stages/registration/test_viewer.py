@@ -132,3 +132,30 @@ def test_an_aligned_overlay_is_grey_where_the_fields_overlap(d):
         inside = rgb[:, : -shift - 1]  # columns whose moved point is in the field (slice i: its columns are y, all in)
         assert np.allclose(inside[..., 0], inside[..., 1], atol=1e-9)
     plt.close(fig)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_a_flagged_overlay_names_every_flag_and_its_whole_reason(d):
+    """The caption carries the whole reason, wrapped (it was cut at 100 characters: a third flag's words were lost),
+    below a 2D row and above a volume's first row."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from topomatch.stages.registration.image import Image
+    from topomatch.stages.registration.register import Flag, Registration
+    from topomatch.stages.registration.reports import draw_overlay
+    from topomatch.stages.registration.transform import RigidTransform
+
+    image = Image(np.random.default_rng(d).normal(size=(12, 14, 10)[:d]))
+    flags = tuple(Flag(name, f"{name} says " + "words " * 40 + f"end of {name}") for name in ("gain", "capture", "mirror"))
+    reg = Registration(transform=RigidTransform.identity(tuple(image.center)), value=0.0, flags=flags, method="m",
+                       seconds=0.0, iterations=0, evaluations=0, stop_reason="")
+    fig, axes = plt.subplots(1 if d == 2 else 3, 5, squeeze=False)
+    draw_overlay(axes, image, image, reg)
+    (caption,) = [t.get_text() for t in fig.texts]
+    flat = " ".join(caption.split())
+    assert "FLAGGED (gain,capture,mirror)" in flat and all(f"end of {n}" in flat for n in ("gain", "capture", "mirror"))
+    assert "\n" in caption and max(map(len, caption.splitlines())) <= 250
+    plt.close(fig)
