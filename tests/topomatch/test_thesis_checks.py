@@ -135,3 +135,42 @@ def test_retrieval_against_spherical_harmonics(tmp_path):
     assert thesis._against_sh("rgpd")(runs)[0] == "reproduced"
     runs = _runs(tmp_path / "b", thesis.W, {"watertight_metrics": metrics(0.5, 0.8)})
     assert thesis._against_sh("rgpd")(runs)[0] == "differs"
+
+
+def test_the_remaining_checks_move_with_their_tables(tmp_path):
+    """Figs. 2.2, 2.3, 2.13-2.15, 3.13 / 4.10 and Tables 3.1 / 4.1: a table that contradicts the sentence moves the
+    verdict (the audit of the twelfth session found these checks without such a test)."""
+    def entropy(argmax, err):
+        return [{"alpha": a, "argmax_p": argmax, "max": 1.0 + err, "max_exact": 1.0} for a in (0.5, 2.0)]
+    e = "registration/entropy_bernoulli"
+    assert thesis._entropy_max(_runs(tmp_path / "a", e, {"fig2_2_tsallis_entropy": entropy(0.5, 0.0)}))[0] == "reproduced"
+    assert thesis._entropy_max(_runs(tmp_path / "b", e, {"fig2_2_tsallis_entropy": entropy(0.4, 0.0)}))[0] == "differs"
+    assert thesis._entropy_max(_runs(tmp_path / "c", e, {"fig2_2_tsallis_entropy": entropy(0.5, 1e-3)}))[0] == "differs"
+
+    def jt(at):
+        return [{"alpha": 0.3, "min_on_diagonal": 0, "max": 0.9, "at_p": at[0], "at_q": at[1]}]
+    assert thesis._jt_bernoulli(_runs(tmp_path / "d", e, {"fig2_3_jensen_tsallis": jt((0.0, 1.0))}))[0] == "reproduced"
+    assert thesis._jt_bernoulli(_runs(tmp_path / "f", e, {"fig2_3_jensen_tsallis": jt((0.5, 1.0))}))[0] == "differs"
+
+    def slices(peak, tre):
+        curves = [{"peak_at": peak, "input": "a|b", "parameter": "tx", "alpha": 2.0}]
+        return {"fig2_14_jt_uniform": curves, "fig2_15_jt_histogram": curves,
+                "slices": [{"true_angle": 10.0, "true_tx": 10.0, "true_ty": 20.0, "tre_mean": tre}]}
+    m = "registration/mri_volume_alpha"
+    assert thesis._mri_slices(_runs(tmp_path / "g", m, slices(0.0, 0.05)))[0] == "reproduced"
+    assert thesis._mri_slices(_runs(tmp_path / "h", m, slices(0.0, 5.0)))[0] == "partly"  # the slices do not register
+    assert thesis._mri_slices(_runs(tmp_path / "i", m, slices(4.0, 5.0)))[0] == "differs"
+
+    def metrics(ours, rival):
+        return [{"method": "rgpd", "average": "micro", "map": ours}, {"method": "sh", "average": "micro", "map": rival}]
+    pr = thesis._pr("rgpd", ("sh",))
+    assert pr(_runs(tmp_path / "j", thesis.W, {"watertight_metrics": metrics(0.6, 0.4)}))[0] == "reproduced"
+    assert pr(_runs(tmp_path / "k", thesis.W, {"watertight_metrics": metrics(0.3, 0.4)}))[0] == "differs"
+
+    def seven(diagonal_hits):
+        names = [f"c{i} 1" for i in range(3)]
+        return [{"query": f"c{i} 0", **{n: f"{1.0 + j}" + (" *" if (j == i) == (i < diagonal_hits) else "")
+                                        for j, n in enumerate(names)}} for i in range(3)]
+    table = thesis._seven_by_seven("rgpd")
+    assert table(_runs(tmp_path / "l", thesis.W, {"watertight_7x7_rgpd": seven(3)}))[0] == "reproduced"
+    assert table(_runs(tmp_path / "m", thesis.W, {"watertight_7x7_rgpd": seven(2)}))[0] == "differs"
