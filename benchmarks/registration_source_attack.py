@@ -48,7 +48,9 @@ round: ``mpl-mri``, the MRI section matplotlib ships as sample data (``s1045.ima
 sagittal head with scalp, face and neck, cut by the grid's lower border; no spacing is stored: 1 mm taken), read
 from the installed matplotlib (nothing copied), 44 cases (four per kind), every case a different draw of the one
 section. Declared before any of its results was seen and run once with the release of 2026-12-07 (3cd93da): an
-attack, nothing is chosen on it.
+attack, nothing is chosen on it. Then, declared after that run and before its own, ``--cases-scale 3`` (132 cases:
+the 44 and 88 fresh draws, indices 44-131) with the session's release (3c34fca; only reports and docs changed since
+3cd93da, no estimate or flag of a registration), to widen the sample on this source.
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_source_attack.py --dims 2 \\
         --json benchmarks/results/registration_source_attack_2d.json
