@@ -100,6 +100,8 @@ LARGE_SEEDS = {("itk-macro", 2): 42612, ("mni-macro", 2): 42622, ("anatomical-ma
 SOURCES_2_SPLIT = "sources-2"
 SOURCES_2 = {2: [("mpl-mri", 44)], 3: []}
 SOURCES_2_SEEDS = {("mpl-mri", 2): 93102}
+ATTACK_SPLITS = (SPLIT, SMALL_SPLIT, LARGE_SPLIT, SOURCES_2_SPLIT)
+"""This script's splits, added to the corpus's by :func:`register_split`."""
 MICRO = {"itk-micro": 0.1, "mni-micro": 0.25, "anatomical-micro": 0.25, "kmeans-micro": 0.1,
          "itk-macro": 20.0, "mni-macro": 5.0, "anatomical-macro": 8.0, "kmeans-macro": 20.0}
 """The factor each relabelled source's spacing and origin are multiplied by (``-macro``: the large-fov split's)."""
@@ -199,7 +201,7 @@ def register_split() -> None:
         return
     corpus.SPLITS.update({SPLIT: SOURCES, SMALL_SPLIT: SMALL_SOURCES, LARGE_SPLIT: LARGE_SOURCES,
                           SOURCES_2_SPLIT: SOURCES_2})
-    corpus.KINDS.update({split: corpus.ELEVEN_KINDS for split in (SPLIT, SMALL_SPLIT, LARGE_SPLIT, SOURCES_2_SPLIT)})
+    corpus.KINDS.update({split: corpus.ELEVEN_KINDS for split in ATTACK_SPLITS})
     corpus.SEEDS.update({(SPLIT, source, dim): seed for (source, dim), seed in SEEDS.items()})
     corpus.SEEDS.update({(SMALL_SPLIT, source, dim): seed for (source, dim), seed in SMALL_SEEDS.items()})
     corpus.SEEDS.update({(LARGE_SPLIT, source, dim): seed for (source, dim), seed in LARGE_SEEDS.items()})
@@ -215,7 +217,7 @@ def register_split() -> None:
     corpus.score = scored
 
     def source_fields(spec: corpus.CaseSpec) -> corpus.Fields:
-        if spec.split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT, SOURCES_2_SPLIT):
+        if spec.split not in ATTACK_SPLITS:
             return fields(spec)
         if spec.source in MICRO:
             return micro_fields(spec.source, spec.index if spec.dim == 2 else 0)
@@ -228,7 +230,7 @@ def register_split() -> None:
 
     def plan_case(split: str, source: str, dim: int, index: int, place: int) -> corpus.CaseSpec:
         spec = plan(split, source, dim, index, place)
-        if split not in (SPLIT, SMALL_SPLIT, LARGE_SPLIT, SOURCES_2_SPLIT):
+        if split not in ATTACK_SPLITS:
             return spec
         grid = volume(source) if dim == 3 else section(source, index)
         extent = float(min(np.asarray(grid.size) * np.asarray(grid.spacing)))

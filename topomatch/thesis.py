@@ -258,12 +258,10 @@ def _mixture_vs_affine(runs: Runs) -> tuple[str, str]:
     """'More faithful', judged on the models with protrusions (one skeleton each): reproduced when the mixture
     distance's endpoint count is nearer the protrusions on most of them and farther on none; partly when nearer in
     total but not on most; differs otherwise. The double torus (no protrusions) is reported, not counted."""
-    def error(function):
-        return {m: 0 if lo <= e <= hi else min(abs(e - lo), abs(e - hi))
-                for m, e, (lo, hi, _) in _endpoint_counts("skeleton_gallery", "skeletons", function, runs) if hi > 0}
-    def bare(function):
-        return sum(e for _, e, (_, hi, _) in _endpoint_counts("skeleton_gallery", "skeletons", function, runs) if hi == 0)
-    mixture, affine = error("mixture"), error("affine")
+    counts = {f: _endpoint_counts("skeleton_gallery", "skeletons", f, runs) for f in ("mixture", "affine")}
+    mixture, affine = ({m: 0 if lo <= e <= hi else min(abs(e - lo), abs(e - hi)) for m, e, (lo, hi, _) in counts[f]
+                        if hi > 0} for f in ("mixture", "affine"))
+    bare = {f: sum(e for _, e, (_, hi, _) in counts[f] if hi == 0) for f in ("mixture", "affine")}
     worse = [m for m in mixture if mixture[m] > affine[m]]
     better = [m for m in mixture if mixture[m] < affine[m]]
     fewer = sum(mixture.values()) < sum(affine.values())
@@ -271,7 +269,7 @@ def _mixture_vs_affine(runs: Runs) -> tuple[str, str]:
     return verdict, (f"endpoints off the protrusion count on {len(mixture)} models with protrusions: mixture "
                      f"{sum(mixture.values())}, affine {sum(affine.values())}; mixture nearer on {len(better)}, farther "
                      f"on {len(worse)}, tied on {len(mixture) - len(better) - len(worse)}; on the double torus (no "
-                     f"protrusions) {bare('mixture')} endpoints against {bare('affine')}, not counted (one skeleton "
+                     f"protrusions) {bare['mixture']} endpoints against {bare['affine']}, not counted (one skeleton "
                      f"per model; a count, not a placement)")
 
 

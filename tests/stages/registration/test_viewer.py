@@ -102,20 +102,32 @@ def test_overlay_windows_each_image_like_the_viewer():
     assert overlay_rgb(bright, ramp).min() == 0.0 and overlay_rgb(bright, ramp).max() == 1.0
 
 
+def _drawn_overlay(d: int, fixed, moving, transform, flags=()):
+    """``draw_overlay`` of a registration ending at ``transform`` with ``flags``, on the rows a ``d``-D image takes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from topomatch.stages.registration.register import Registration
+    from topomatch.stages.registration.reports import draw_overlay
+
+    reg = Registration(transform=transform, value=0.0, flags=tuple(flags), method="m", seconds=0.0, iterations=0,
+                       evaluations=0, stop_reason="")
+    fig, axes = plt.subplots(1 if d == 2 else 3, 5, squeeze=False)
+    draw_overlay(axes, fixed, moving, reg)
+    return fig, axes
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_an_aligned_overlay_is_grey_where_the_fields_overlap(d):
     """``draw_overlay`` windows each image over all its pixels, not over each drawn plane: a moving image that is the
     fixed one shifted by whole pixels, registered by that shift, draws grey (R = G) wherever both fields of view reach,
     in every plane, although the resampled plane holds the moving minimum where its field of view ends (with a plane's
     own percentiles that fill moved the window and tinted the aligned overlay green)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from topomatch.stages.registration.image import Image
-    from topomatch.stages.registration.register import Registration
-    from topomatch.stages.registration.reports import draw_overlay
     from topomatch.stages.registration.transform import RigidTransform
 
     data = np.random.default_rng(d).normal(size=(24, 26, 22)[:d]) - 3.0  # negative values: the fill is not 0
@@ -123,10 +135,7 @@ def test_an_aligned_overlay_is_grey_where_the_fields_overlap(d):
     shift = 5  # whole pixels along the last axis (x), wrapped: fixed(p) = moving(p + 5 x) for the first n - 5 columns
     moving = Image(np.roll(data, shift, axis=-1))  # the same intensities: the same window as the fixed image's
     transform = RigidTransform((0.0,) * (3 * d - 3 - d) + (float(shift),) + (0.0,) * (d - 1), tuple(fixed.center))
-    reg = Registration(transform=transform, value=0.0, flags=(), method="m", seconds=0.0, iterations=0, evaluations=0,
-                       stop_reason="")
-    fig, axes = plt.subplots(1 if d == 2 else 3, 5, squeeze=False)
-    draw_overlay(axes, fixed, moving, reg)
+    fig, axes = _drawn_overlay(d, fixed, moving, transform)
     for row in axes:
         rgb = row[4].get_images()[0].get_array()
         inside = rgb[:, : -shift - 1]  # columns whose moved point is in the field (slice i: its columns are y, all in)
@@ -138,22 +147,15 @@ def test_an_aligned_overlay_is_grey_where_the_fields_overlap(d):
 def test_a_flagged_overlay_names_every_flag_and_its_whole_reason(d):
     """The caption carries the whole reason, wrapped (it was cut at 100 characters: a third flag's words were lost),
     below a 2D row and above a volume's first row."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     from topomatch.stages.registration.image import Image
-    from topomatch.stages.registration.register import Flag, Registration
-    from topomatch.stages.registration.reports import draw_overlay
+    from topomatch.stages.registration.register import Flag
     from topomatch.stages.registration.transform import RigidTransform
 
     image = Image(np.random.default_rng(d).normal(size=(12, 14, 10)[:d]))
     flags = tuple(Flag(name, f"{name} says " + "words " * 40 + f"end of {name}") for name in ("gain", "capture", "mirror"))
-    reg = Registration(transform=RigidTransform.identity(tuple(image.center)), value=0.0, flags=flags, method="m",
-                       seconds=0.0, iterations=0, evaluations=0, stop_reason="")
-    fig, axes = plt.subplots(1 if d == 2 else 3, 5, squeeze=False)
-    draw_overlay(axes, image, image, reg)
+    fig, _ = _drawn_overlay(d, image, image, RigidTransform.identity(tuple(image.center)), flags)
     (caption,) = [t.get_text() for t in fig.texts]
     flat = " ".join(caption.split())
     assert "FLAGGED (gain,capture,mirror)" in flat and all(f"end of {n}" in flat for n in ("gain", "capture", "mirror"))
