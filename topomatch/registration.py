@@ -192,6 +192,7 @@ def register(fixed: Image | str | Path, moving: Image | str | Path, *, metric: s
         if value is not None:
             set_path(overrides, REGISTER_OPTIONS[keyword].path, value, keyword)
     if params:
+        RegisterParams.parse(params, "params")  # a bad value named as the caller wrote it, before any image is read
         overrides["register"] = deep_merge(params, overrides.get("register", {}))  # a keyword above wins
     return register_with(fixed, moving, overrides)
 

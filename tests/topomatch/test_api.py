@@ -117,8 +117,10 @@ def test_register_params_are_the_commands_set(capsys):
     assert code == 1  # flagged by the threshold set either way
     assert api.to_dict()["parameters"] == cli["parameters"] and not api.ok and "prominence" in api.to_dict()["flags"]
     assert api.to_dict()["alpha"] == cli["alpha"] == 1.0
-    with pytest.raises(topomatch.ConfigError, match="bogus"):
+    with pytest.raises(topomatch.ConfigError, match=r"^params\.check\.bogus: unknown key"):
         topomatch.register(fixed_path, moving_path, params={"check": {"bogus": 1}})
+    with pytest.raises(topomatch.ConfigError, match=r"^params\.check\.min_flatness: .*got -1"):  # named as written
+        topomatch.register(fixed_path, moving_path, params={"check": {"min_flatness": -1}})
 
 
 def test_run_config_finds_installed_configs(tmp_path, monkeypatch):
