@@ -48,7 +48,7 @@ SPLIT = "kinds"
 SPLIT_SEEDS = {"kinds": 52000, "kinds-2": 53000, "kinds-3": 54000, "kinds-4": 57000, "kinds-5": 58000,
                "kinds-6": 59000, "label-kinds": 61000, "kinds-7": 62000,
                "kinds-8": 64000, "kinds-9": 66000, "kinds-10": 68000,
-               "kinds-11": 85000, "kinds-12": 88000}
+               "kinds-11": 85000, "kinds-12": 88000, "ct-kinds": 95000}
 """The splits and their seeds' base (``kinds-2``: the same design, declared after ``kinds`` had run once, before any
 code changed; run once with the same release; ``kinds-3``: the same design, declared with the thirty-third round,
 which ``kinds`` and ``kinds-2`` motivated, run once with its code; ``kinds-4``: declared on the branch of a
@@ -94,9 +94,25 @@ any run: its 2D cases run with ``registration_mirror_attack.py --kinds-attack`` 
 (unflipped, ``--dims 2 --metrics jt --methods ours``), each with the release and with the round (corpus.py, ``final46``);
 ``kinds-12``: the same design, fresh seeds 88xxx, declared on 2026-12-07 (eleventh session) as the attack on the
 forty-fifth round (the mirror test in 3D), before any run: its 3D cases run flipped and unflipped, JT, with the release
-and with the round (corpus.py, ``final48``)."""
+and with the round (corpus.py, ``final48``).
+
+``ct-kinds``: two contrasts users bring that no split drew and no threshold saw, declared on 2026-12-07 (thirteenth
+session) before any run, fresh seeds 95xxx, the design of ``kinds`` (sources and counts), run once with the release
+(e07100d's registration code, unchanged since 3cd93da), JT and MI, elastix beside them; nothing is chosen on it:
+
+- ``ct``: a CT-like head (an MR-CT pair): the brain at Hounsfield-like levels scaled to air 0 and bone 1 (CSF 0.5025,
+  grey matter 0.52, white matter 0.5125: the brain near uniform), a skull shell of bone 2-4 voxels thick starting 1-2
+  voxels outside the mask, a scalp band of 2 voxels at soft tissue (0.52) outside it, air beyond; noise, no bias (CT
+  has none). The skull-stripped MNI fixed image has nothing where the shell is (its structure is an outline around
+  the brain's); for ``kmeans`` the mask is the head, so the shell lies outside the scalp (an attack, not anatomy);
+- ``flair``: a FLAIR-like contrast (T2 with the CSF suppressed: CSF 0.1, grey matter 0.85, white matter 0.6, jittered
+  as the corpus's contrasts; without fractions :func:`misalign.tissue_contrast` at :data:`FLAIR_LEVELS`): the
+  relation to the T1 is not monotonic (CSF darkest in both, grey and white matter swapped); bias and noise;
+- ``t1``: the control.
+
+Both swap by the corpus's rule (the kind as the fixed image)."""
 KINDS = ("atlas", "regions", "inverted_mask", "contour", "t1")
-SPLIT_KINDS = {"label-kinds": ("posterized", "atlas_bg255")}
+SPLIT_KINDS = {"label-kinds": ("posterized", "atlas_bg255"), "ct-kinds": ("ct", "flair", "t1")}
 """Splits with kinds of their own: ``posterized`` (a label-like image whose inner boundaries follow the anatomy, where
 the label test must not fire) and ``atlas_bg255`` (a label map whose background is not its minimum, so that the
 test's object, the pixels above the minimum, is not the brain)."""
@@ -107,6 +123,12 @@ SEEDS = {("mni", 3): 103, ("mni15", 3): 703, ("kmeans", 3): 203, ("anatomical", 
 """Each source's seed offset from its split's base."""
 CONTOUR_WIDTH = 2
 """Voxels: the width of the contour band (inside the mask's boundary)."""
+CT_BRAIN = (0.5025, 0.52, 0.5125)
+"""``ct``: CSF, grey and white matter at (HU + 1000) / 2000 for 5, 40 and 25 HU (air 0, bone 1)."""
+FLAIR_VALUES = (0.1, 0.85, 0.6)
+"""``flair``: CSF, grey and white matter (fractions)."""
+FLAIR_LEVELS = (0.0, 0.05, 0.1, 0.15, 0.85, 0.7, 0.6, 0.6)
+"""``flair`` without fractions: :func:`misalign.tissue_contrast`'s levels (background, CSF ... white matter)."""
 
 
 def region_seeds(f: corpus.Fields, spec: corpus.CaseSpec, low: int, high: int) -> np.ndarray:
@@ -172,13 +194,41 @@ def kind_atlas_bg255(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrad
     return np.where(atlas > 0, atlas, 255.0)
 
 
+def kind_ct(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """A CT-like head: the brain's tissue classes at :data:`CT_BRAIN`, a bone shell (1.0) 2-4 voxels thick from 1-2
+    voxels outside the mask, 2 voxels of scalp (0.52), air (0); noise, no bias."""
+    rng = np.random.default_rng([spec.seed, spec.index, 23])
+    gap, thickness = int(rng.integers(1, 3)), int(rng.integers(2, 5))
+    tissue = corpus.kind_labels(f, spec, deg).astype(int)  # 0 outside, 1..3 CSF, GM, WM
+    mask = corpus._foreground(f)
+    inner = ndimage.binary_dilation(mask, iterations=gap)
+    bone = ndimage.binary_dilation(inner, iterations=thickness)
+    head = ndimage.binary_dilation(bone, iterations=2)
+    data = np.where(head, CT_BRAIN[1], 0.0)
+    data[bone] = 1.0
+    data[inner] = CT_BRAIN[0]
+    data[tissue > 0] = np.asarray(CT_BRAIN)[tissue[tissue > 0] - 1]
+    return deg.noise(data)
+
+
+def kind_flair(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.ndarray:
+    """FLAIR-like: CSF dark, grey matter bright, white matter mid (fractions), or the T1 through
+    :data:`FLAIR_LEVELS`; bias and noise."""
+    if f.has_fractions:
+        data = corpus._contrast(f, FLAIR_VALUES, spec.contrast_jitter)
+    else:
+        data = corpus.tissue_contrast(f.maps["t1"], FLAIR_LEVELS)
+    return deg.noise(deg.bias(data))
+
+
 def register_split() -> None:
     """Add the split and its kinds to the corpus module (this process only)."""
     if SPLIT in corpus.SPLITS:
         return
     corpus.KIND_MAKERS.update({"atlas": kind_atlas, "regions": kind_regions, "inverted_mask": kind_inverted_mask,
-                               "contour": kind_contour, "posterized": kind_posterized, "atlas_bg255": kind_atlas_bg255})
-    corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:4] + SPLIT_KINDS["label-kinds"]
+                               "contour": kind_contour, "posterized": kind_posterized, "atlas_bg255": kind_atlas_bg255,
+                               "ct": kind_ct, "flair": kind_flair})
+    corpus.SWAPPABLE = tuple(corpus.SWAPPABLE) + KINDS[:4] + SPLIT_KINDS["label-kinds"] + SPLIT_KINDS["ct-kinds"][:2]
     last = max(corpus.SPLIT_ORDER.values())
     for i, (split, base) in enumerate(SPLIT_SEEDS.items()):
         corpus.SPLITS[split], corpus.KINDS[split] = SOURCES, SPLIT_KINDS.get(split, KINDS)
@@ -201,7 +251,8 @@ def register_split() -> None:
 
     def maps_needed(kind: str, f: corpus.Fields) -> set[str]:
         extra = {"atlas": needed("labels", f), "regions": {"mask"}, "inverted_mask": {"mask"}, "contour": {"mask"},
-                 "posterized": {"mask"}, "atlas_bg255": needed("labels", f)}
+                 "posterized": {"mask"}, "atlas_bg255": needed("labels", f), "ct": needed("labels", f),
+                 "flair": needed("t2", f)}
         return extra[kind] | {"t1"} if kind in extra else needed(kind, f)
 
     corpus.plan_case, corpus.maps_needed = plan_case, maps_needed
