@@ -8,7 +8,7 @@ Usage (a corpus run with ``--cache DIR`` first, so the case files are kept)::
         --dims 2,3 --methods ours --metrics jt,mi --cache /tmp/corpus --json /tmp/tune.json
     .venv/bin/python benchmarks/registration_gap_reference.py /tmp/corpus /tmp/tune.json
 
-Finding (docs/registration.md, sixth round): the gap's optimum moves correct results far (a silhouette's mask is
+Finding (docs/registration_history.md, sixth round): the gap's optimum moves correct results far (a silhouette's mask is
 not the T1's Otsu object), so it is no reference; in 3D it costs about 80 s a case.
 """
 

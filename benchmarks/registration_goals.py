@@ -1,7 +1,7 @@
 """The issue's four accuracy goals, counted from the report splits' recorded rows (no registration is run).
 
 Each report split (``final15``..``final51`` by default, the decision splits left out: every one declared before it ran,
-run once, nothing chosen on it) is judged per dimension as the goals read (docs/registration.md, "What this release's ... fresh splits say"):
+run once, nothing chosen on it) is judged per dimension as the goals read (docs/registration.md, "Where the issue's goals stand"):
 
 - *0 silent*: no result of ours that passed its self-check is wrong, with JT and with MI;
 - *within 1 wherever elastix is*: no case elastix gets right (:func:`registration_corpus.correct`) that ours gets wrong,

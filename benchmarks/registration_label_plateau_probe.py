@@ -1,4 +1,4 @@
-"""For the next round's label-map detector (docs/registration.md, the kind attack): the share of an image's object
+"""For the next round's label-map detector (docs/registration_history.md, the kind attack): the share of an image's object
 (``structure.object_mask``) whose pixels equal their next neighbour along every axis (exact plateaus), and its number
 of distinct values, per kind, on the tune, blur and capture splits and the kind attack's ``kinds`` split (2D and 3D),
 and for the two bundled ITK PNG slices (uint8). Measures the images only; registers nothing.

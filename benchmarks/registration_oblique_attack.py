@@ -34,7 +34,7 @@ Splits:
   1 % of the cases. The round is merged if the rule holds in both dimensions; ``final41``
   (``registration_corpus.py``) is then run once with whichever code it decides. Nothing is chosen on it. Outcome: every
   condition held (3D false flags 11 -> 5 with JT and MI, 2D 5 -> 5, no silent or correct count changed), so the round was
-  merged (docs/registration.md, the thirty-ninth round), then kept in 3D only (``check.search_region``): in 2D it had
+  merged (docs/registration_history.md, the thirty-ninth round), then kept in 3D only (``check.search_region``): in 2D it had
   shown no gain here and it silenced three seen wrong results (``registration_prominence_catches.py``).
 - ``oblique-2`` (seeds 90xxx), declared (2026-12-07, eleventh session) with the forty-sixth round before either tree ran
   on it: its decision split with ``final49`` (``registration_corpus.py``), 3D at ``--cases-scale 2`` (60 cases), JT and

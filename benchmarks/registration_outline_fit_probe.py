@@ -1,6 +1,6 @@
 """A probe that chose nothing (fifteenth round, 2026-12-05): could the outlines themselves say how far an outline-only
 result is off, and so replace the ``outline`` flag's drop criterion (``check.outline_drop``), the source of most of its
-false flags? Measured on the tune side's outline-only JT results, not adopted; docs/registration.md says why.
+false flags? Measured on the tune side's outline-only JT results, not adopted; docs/registration_history.md says why.
 
 For each outline-only result (a row whose measures hold ``outline_gap``) of the given corpus JSON files: the moving
 object (``structure.object_mask``) mapped onto the fixed grid at the estimate, its signed distance (``scipy.ndimage``'s

@@ -1,4 +1,4 @@
-"""The residual test's measures on the tune side's images (the ninth round's threshold rule, docs/registration.md).
+"""The residual test's measures on the tune side's images (the ninth round's threshold rule, docs/registration_history.md).
 
 Usage::
 

@@ -1,5 +1,5 @@
 """Where a 2D registration's error comes from, and what averaging over samples buys: the probe behind the thirty-first
-round (docs/registration.md). No registration code is changed by it.
+round (docs/registration_history.md). No registration code is changed by it.
 
 For the first ``--cases`` cases of a corpus split (``--kinds`` to restrict them), registered with the defaults but
 ``optimizer.ensemble: 0`` (the result before the round), the mean TRE in pixels of:

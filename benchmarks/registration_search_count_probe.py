@@ -5,7 +5,7 @@ sample) pair. This probe compiles the same count as 8 lines of C (``h[s][min(fbk
 K)]++``, the per-step cells never materialised) with the system's C compiler, calls it through ctypes in place of the
 numpy lines, and times the whole search (``_Run.grid``, median of 11) both ways on the first case of each dimension of
 the ``report`` split (the speed benchmark's first pairs), checking that the grids are identical.
-docs/registration.md ("Speed as the user runs it") says why it was not built in.
+docs/registration_history.md ("Speed, every run") says why it was not built in.
 
     TOPOMATCH_DATA_ROOT=../shared/data .venv/bin/python benchmarks/registration_search_count_probe.py
 """

@@ -11,7 +11,7 @@ or ``ours-mi`` passed its self-check with a wrong result (:func:`registration_co
 their seeds (:func:`registration_corpus.build_case`) and registered with JT and MI as a user runs it
 (:func:`registration_corpus.run_ours`: ``topomatch.register`` on the written files). Prints then and now per case and
 metric (TRE, ok / flags) and the count still silently wrong. These splits are *seen*: nothing here is a report number
-and nothing is chosen on it; it finds which mechanisms are still open (docs/registration.md, tenth round).
+and nothing is chosen on it; it finds which mechanisms are still open (docs/registration_history.md, tenth round).
 """
 
 from __future__ import annotations

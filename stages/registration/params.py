@@ -291,7 +291,7 @@ def _level(spacing, bins, iterations, step, c, interpolation, samples=None, **mo
 DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
     2: {
         # factors 4 and 2, then native pixels (the 2D accuracy sweep of docs/registration.md); 20,000 samples at the
-        # finest level; the thresholds of the self-check: the validation corpus's tune split (docs/registration.md)
+        # finest level; the thresholds of the self-check: the validation corpus's tune split (docs/registration_history.md)
         "schedule": [_level(4.0, 16, 260, 4.0, 8.0, "parzen"), _level(2.0, 24, 40, 1.0, 2.0, "parzen"),
                      _level(0.0, 32, 30, 0.3, 0.5, "parzen", 20000, average=2, gain_alpha=1.0)],
         "optimizer": {"ensemble": 2},  # thirty-first round

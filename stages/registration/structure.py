@@ -127,7 +127,7 @@ def interior_spread(image: Image) -> float:
     >= 0): ``(q90 - q10) / |median(core) - median(background core)|`` on :func:`analysed_copy`, the core being the
     Otsu content (:func:`~.image.foreground_mask`, holes not filled) and the background core the rest, each eroded
     by one pixel; a noisy mask scores 2.56 times its (block-averaged) noise over its contrast, a binary image 0
-    (docs/registration.md, ``outline``, fourth round). NaN when the content fills the grid, either core has fewer
+    (docs/registration_history.md, ``outline``, fourth round). NaN when the content fills the grid, either core has fewer
     than 10 pixels, or less than :data:`SOLID` of the object (:func:`object_mask`) is content (a thresholded image:
     structure inside)."""
     small = analysed_copy(image)
@@ -145,7 +145,7 @@ def two_class_residual(image: Image) -> float:
     """The worse of ``image``'s two Otsu classes' variance over the squared difference of their means (an inverse
     squared contrast-to-noise ratio, unit-free): a mask or silhouette with noise s and contrast D scores (s / D)^2
     whatever fraction of the grid it fills (2 % noise: 4e-4), an image with an inside far more (brain sections >= 0.004
-    on the corpus; docs/registration.md, ``outline``, sixth round). Judged only where :func:`interior_structure` and
+    on the corpus; docs/registration_history.md, ``outline``, sixth round). Judged only where :func:`interior_structure` and
     :func:`interior_spread` cannot (both NaN: an object that fills the grid, a tight field of view; both are kept on
     the image); NaN elsewhere; 0 for two exact plateaus and a ramp (:data:`PLATEAU`)."""
     if not (np.isnan(interior_structure(image)) and np.isnan(interior_spread(image))):
