@@ -297,7 +297,7 @@ DIMENSION_DEFAULTS: dict[int, dict[str, Any]] = {
         "optimizer": {"ensemble": 2},  # thirty-first round
     },
     3: {
-        # 8, 4 and 2 mm (the 3D tune sets of docs/registration.md)
+        # 8, 4 and 2 mm (the 3D tune sets of docs/registration_history.md)
         "schedule": [_level(8.0, 16, 150, 4.0, 4.0, "parzen", 4000), _level(4.0, 24, 60, 1.0, 2.0, "parzen", 8000),
                      _level(2.0, 64, 40, 0.3, 1.0, "parzen", 30000, average=2, gain_alpha=1.0, settle=0.2, reruns=2)],
         "start": {"steps": 2, "iterations": 40}, "optimizer": {"average_finest": 1}, "bounds": {"max_angle": 45.0},
