@@ -319,6 +319,10 @@ Splits (:data:`SPLITS`, :data:`KINDS`, :data:`SEEDS`; each fixed before its resu
 - ``final51``: declared (2026-12-07, twelfth session) before any run of it, no code changed since ``final50``: the
   design of ``final43``, fresh seeds 94xxx; run once with the release 3cd93da, nothing chosen on it: a second report
   split of the same code, to see whether ``final50``'s counts hold on another draw.
+- ``final52``: declared (2026-12-07, thirteenth session) before any run of it, no registration code changed since
+  ``final51`` (the API's ``params`` check runs before the registration and changes no result): the design of
+  ``final43``, fresh seeds 96xxx (95xxx went to the ``ct-kinds`` attack); run once with the release, nothing chosen on
+  it: the last report split before the issue is declared blocked, a third draw of the same code.
 - ``outline3d``: the decision split of the forty-first round (in 3D the outline test's drop, ``check.outline_drop``,
   no longer flags: its 3D flags on the seen report splits were all on correct results or on results other tests
   refused too), declared (2026-12-06, ninth session) with the round's rule before either tree ran on it: 3D only, the
@@ -407,7 +411,7 @@ SPLITS: dict[str, dict[int, list[tuple[str, int]]]] = {
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
     "final6": {3: [("mni", 12), ("mni15", 6), ("kmeans", 6), ("anatomical", 6)],
                2: [("mni-axial", 24), ("mni-coronal", 24), ("mni-sagittal", 24), ("itk", 24)]},
-    **{f"final{n}": FINAL_DESIGN for n in range(7, 52)},  # final7 to final51: one design, fresh seeds each
+    **{f"final{n}": FINAL_DESIGN for n in range(7, 53)},  # final7 to final52: one design, fresh seeds each
     "tight-outline": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "tight-outline-2": {2: [("mni-axial", 40), ("mni-coronal", 40), ("mni-sagittal", 40)]},
     "outline3d": {3: [("mni", 12), ("mni15", 12), ("kmeans", 12), ("anatomical", 12)]},
@@ -434,7 +438,7 @@ KINDS = {"tune": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "satura
          "final5": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final6": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
          "final7": ("t1", "t2", "pd", "labels", "silhouette", "threshold", "saturated", "inverted", "gamma"),
-         **{f"final{n}": ELEVEN_KINDS for n in range(8, 52)},  # final8 to final51
+         **{f"final{n}": ELEVEN_KINDS for n in range(8, 53)},  # final8 to final52
          "tight-outline": ("silhouette", "silhouette_resampled"),
          "tight-outline-2": ("silhouette", "silhouette_resampled"),
          "spread": ("saturated", "pd"),
@@ -596,6 +600,9 @@ SEEDS = {("tune", "mni", 3): 1103, ("tune", "mni-axial", 2): 1102,
          ("tight-outline", "mni-sagittal", 2): 79502,
          ("tight-outline-2", "mni-axial", 2): 81102, ("tight-outline-2", "mni-coronal", 2): 81402,
          ("tight-outline-2", "mni-sagittal", 2): 81502,
+         ("final52", "mni", 3): 96103, ("final52", "mni15", 3): 96703, ("final52", "kmeans", 3): 96203,
+         ("final52", "anatomical", 3): 96303, ("final52", "mni-axial", 2): 96102, ("final52", "mni-coronal", 2): 96402,
+         ("final52", "mni-sagittal", 2): 96502, ("final52", "itk", 2): 96602,
          ("final51", "mni", 3): 94103, ("final51", "mni15", 3): 94703, ("final51", "kmeans", 3): 94203,
          ("final51", "anatomical", 3): 94303, ("final51", "mni-axial", 2): 94102, ("final51", "mni-coronal", 2): 94402,
          ("final51", "mni-sagittal", 2): 94502, ("final51", "itk", 2): 94602,
@@ -639,7 +646,7 @@ SPLIT_ORDER = {"tune": 0, "edge": 1, "tight": 1.5, "capture": 1.7, "blur": 1.8, 
                "final8": 13, "final9": 14, "final10": 15, "final11": 16, "final12": 17,
                "final13": 18, "final14": 19,
                "final15": 20, "final16": 21, "final17": 22, "final18": 23, "final19": 24,
-               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51, "final47": 52, "final48": 53, "final49": 54, "final50": 55, "final51": 56}
+               "final20": 25, "final21": 26, "final22": 27, "final23": 28, "final24": 29, "final25": 30, "final26": 31, "final27": 32, "final28": 33, "final29": 34, "final30": 35, "final31": 36, "final32": 37, "final33": 38, "final34": 39, "final35": 40, "final36": 41, "final37": 42, "final38": 43, "final39": 44, "final40": 45, "final41": 46, "spread": 46.5, "final42": 47, "outline3d": 47.5, "tight-outline": 47.7, "final43": 48, "tight-outline-2": 48.2, "final44": 49, "final45": 50, "final46": 51, "final47": 52, "final48": 53, "final49": 54, "final50": 55, "final51": 56, "final52": 57}
 EDGE_SPLITS = ("edge",)
 """Splits whose sections are drawn from the outer 12 % of the brain's extent at either end (small sections)."""
 EDGE_FRACTION = 0.12
