@@ -207,7 +207,8 @@ def kind_ct(f: corpus.Fields, spec: corpus.CaseSpec, deg: corpus.Degrade) -> np.
     data = np.where(head, CT_BRAIN[1], 0.0)
     data[bone] = 1.0
     data[inner] = CT_BRAIN[0]
-    data[tissue > 0] = np.asarray(CT_BRAIN)[tissue[tissue > 0] - 1]
+    brain = tissue > 0
+    data[brain] = np.asarray(CT_BRAIN)[tissue[brain] - 1]
     return deg.noise(data)
 
 
